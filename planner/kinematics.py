@@ -1,0 +1,379 @@
+"""Leg kinematics generated from the Pinocchio model (paper section 5.1).
+
+Forward kinematics is the product of exponentials of eq. 1-2: with the twist of joint j
+of leg i a pure rotation about the unit axis omega_{i,j} through r^0_{i,j} (both read from
+Pinocchio at zero joint angles, body frame B),
+
+    ^B r_i = exp(xi_1 theta_1) exp(xi_2 theta_2) exp(xi_3 theta_3) ^B r^0_i.
+
+The same chain is written once in numpy and once in CasADi (exact derivatives for IPOPT).
+Inverse kinematics (section 5.1.2) uses Paden-Kahan subproblem 3 for the knee, then
+subproblem 2 for the two hip joints, when the first two axes intersect; otherwise a bounded
+least-squares fallback. The centre of mass is whole-body (every link's inertia moves with
+its joint) or, as the paper assumes, the body link's alone.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import casadi as ca
+import numpy as np
+from scipy.optimize import least_squares
+
+from planner import paden_kahan as pk
+
+if TYPE_CHECKING:
+    from planner.robot import Leg, Robot
+
+AXES_INTERSECT_TOL_M = 1e-9
+NOMINAL_DEPTH_FRACTION = 0.8  # theta_nor puts the foot at 80 % of the leg's vertical reach
+
+
+def _rot_np(axis: np.ndarray, angle: float) -> np.ndarray:
+    """Rodrigues' formula for a unit axis."""
+    w = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + np.sin(angle) * w + (1 - np.cos(angle)) * (w @ w)
+
+
+def _rot_ca(axis: np.ndarray, angle):
+    w = ca.DM([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return ca.DM.eye(3) + ca.sin(angle) * w + (1 - ca.cos(angle)) * ca.mtimes(w, w)
+
+
+def twist_apply_np(leg: Leg, theta: np.ndarray, point_B: np.ndarray, upto: int = 3) -> np.ndarray:
+    """exp(xi_1 th_1) ... exp(xi_upto th_upto) applied to a body-frame point (eq. 2)."""
+    p = np.asarray(point_B, dtype=float)
+    for j in reversed(range(upto)):
+        r = leg.points_B[j]
+        p = _rot_np(leg.axes_B[j], theta[j]) @ (p - r) + r
+    return p
+
+
+def twist_apply_ca(leg: Leg, theta, point_B, upto: int = 3):
+    """CasADi version of :func:`twist_apply_np` (theta a 3-vector SX/MX)."""
+    p = ca.DM(point_B) if isinstance(point_B, np.ndarray) else point_B
+    for j in reversed(range(upto)):
+        r = ca.DM(leg.points_B[j])
+        p = ca.mtimes(_rot_ca(leg.axes_B[j], theta[j]), p - r) + r
+    return p
+
+
+@dataclass
+class IKResult:
+    """Result of leg inverse kinematics in body frame.
+
+    ``joints_rad`` always holds finite angles: the chosen solution when ``reachable``,
+    otherwise the in-limit angles whose foot comes closest to the target.
+    """
+
+    joints_rad: np.ndarray
+    reachable: bool
+    error_m: float  # |FK(joints) - target|
+    method: str  # "paden-kahan" or "numeric"
+    knee_flipped: bool = False  # True when only the non-preferred knee branch reaches
+    solutions: list | None = None  # every in-limit exact solution (3,) found
+    reason: str = ""
+
+
+def hip_centre_B(leg: Leg) -> np.ndarray | None:
+    """Intersection of the first two joint axes, or None when they do not intersect."""
+    w1, w2 = leg.axes_B[0], leg.axes_B[1]
+    r1, r2 = leg.points_B[0], leg.points_B[1]
+    n = np.cross(w1, w2)
+    if np.linalg.norm(n) < 1e-12:
+        return None
+    if abs(np.dot(r2 - r1, n)) / np.linalg.norm(n) > AXES_INTERSECT_TOL_M:
+        return None
+    # solve r1 + a w1 = r2 + b w2 in least squares
+    a, b = np.linalg.lstsq(np.column_stack([w1, -w2]), r2 - r1, rcond=None)[0]
+    return 0.5 * ((r1 + a * w1) + (r2 + b * w2))
+
+
+def _wrap_into_limits(angle: float, lo: float, hi: float, tol: float = 1e-12) -> list[float]:
+    out = []
+    for k in (-1, 0, 1):
+        a = angle + 2 * np.pi * k
+        if lo - tol <= a <= hi + tol:
+            out.append(float(np.clip(a, lo, hi)))
+    return out
+
+
+class LegKinematics:
+    """Numeric and symbolic kinematics of every leg of a :class:`Robot`."""
+
+    def __init__(self, robot: Robot):
+        self.robot = robot
+        self.legs = robot.legs
+        th = ca.SX.sym("theta", 3)
+        self._foot_fun = []
+        for leg in self.legs:
+            p = twist_apply_ca(leg, th, leg.foot_B0)
+            self._foot_fun.append(ca.Function(f"foot_{leg.name}", [th], [p, ca.jacobian(p, th)]))
+        self._centres = [hip_centre_B(leg) for leg in self.legs]
+        # link masses and COMs at zero configuration (body frame), grouped by leg joint
+        model = robot.model
+        import pinocchio as pin
+
+        data = model.createData()
+        pin.forwardKinematics(model, data, pin.neutral(model))
+        self._link_mass = []  # per leg: list of (joint number 0..2, mass, com_B0)
+        for leg in self.legs:
+            items = []
+            for j, jid in enumerate(leg.joint_ids):
+                inertia = model.inertias[jid]
+                if inertia.mass > 0:
+                    items.append((j, float(inertia.mass), data.oMi[jid].act(inertia.lever)))
+            self._link_mass.append(items)
+        theta12 = ca.SX.sym("theta", 12)
+        self._com_fun = ca.Function("com_B", [theta12], [self.com_B_ca(theta12)])
+
+    # ---- forward kinematics -------------------------------------------------------------
+    def foot_B(self, leg: int, theta_rad) -> np.ndarray:
+        """Foot sphere centre of one leg in body frame (eq. 2)."""
+        return twist_apply_np(self.legs[leg], np.asarray(theta_rad, float), self.legs[leg].foot_B0)
+
+    def foot_jacobian_B(self, leg: int, theta_rad) -> np.ndarray:
+        """(3, 3) d foot_B / d theta, exact (CasADi algorithmic differentiation)."""
+        return np.array(self._foot_fun[leg](np.asarray(theta_rad, float))[1])
+
+    def feet_B(self, joints_rad) -> np.ndarray:
+        """(4, 3) foot centres in body frame for (4, 3) joint angles."""
+        joints = np.asarray(joints_rad, float).reshape(4, 3)
+        return np.array([self.foot_B(i, joints[i]) for i in range(4)])
+
+    def feet_W(self, base_position_W, base_rotation_W, joints_rad) -> np.ndarray:
+        """(4, 3) foot centres in world frame."""
+        return self.feet_B(joints_rad) @ np.asarray(base_rotation_W).T + np.asarray(base_position_W)
+
+    def foot_B_ca(self, leg: int, theta):
+        """Symbolic foot centre of one leg in body frame (CasADi 3-vector)."""
+        return twist_apply_ca(self.legs[leg], theta, self.legs[leg].foot_B0)
+
+    def feet_W_ca(self, base_position_W, base_rotation_W, joints12):
+        """Symbolic (3 x 4) foot centres in world frame; joints12 legs in order FL..HR."""
+        cols = [
+            ca.mtimes(base_rotation_W, self.foot_B_ca(i, joints12[3 * i : 3 * i + 3]))
+            + base_position_W
+            for i in range(4)
+        ]
+        return ca.horzcat(*cols)
+
+    # ---- centre of mass -----------------------------------------------------------------
+    def com_B(self, joints_rad, whole_body: bool = True) -> np.ndarray:
+        """Centre of mass in body frame: whole-body (default) or body link only (paper)."""
+        if not whole_body:
+            return self.robot.body_com_B.copy()
+        return np.array(self._com_fun(np.asarray(joints_rad, float).ravel())).ravel()
+
+    def com_B_ca(self, joints12, whole_body: bool = True):
+        """Symbolic centre of mass in body frame (CasADi 3-vector)."""
+        r = self.robot
+        if not whole_body:
+            return ca.DM(r.body_com_B)
+        acc = ca.DM(r.body_mass_kg * r.body_com_B)
+        for i, items in enumerate(self._link_mass):
+            th = joints12[3 * i : 3 * i + 3]
+            for j, mass, com0 in items:
+                acc = acc + mass * twist_apply_ca(self.legs[i], th, com0, upto=j + 1)
+        return acc / r.total_mass_kg
+
+    # ---- inverse kinematics -------------------------------------------------------------
+    def knee_direction(self, leg: int, theta_rad) -> int:
+        """+1 when the knee lies forward (+x_B) of the hip-foot line, -1 when rearward."""
+        lg = self.legs[leg]
+        th = np.asarray(theta_rad, float)
+        hip = twist_apply_np(lg, th, lg.points_B[1], upto=1)
+        knee = twist_apply_np(lg, th, lg.points_B[2], upto=2)
+        foot = self.foot_B(leg, th)
+        d = foot - hip
+        v = (knee - hip) - np.dot(knee - hip, d) / max(np.dot(d, d), 1e-300) * d
+        return 1 if v[0] >= 0 else -1
+
+    def ik_leg(
+        self,
+        leg: int,
+        target_B,
+        reference_rad=None,
+        knee: int | None = None,
+        tol_m: float = 1e-9,
+    ) -> IKResult:
+        """Joint angles putting leg ``leg``'s foot centre at ``target_B`` (section 5.1.2).
+
+        ``knee`` (+1 forward, -1 rearward) defaults to the leg's knee configuration;
+        among the in-limit solutions of that branch the one nearest ``reference_rad``
+        (default theta_nor) is returned. If only the other branch reaches, it is returned
+        with ``knee_flipped=True``; if none does, ``reachable=False``.
+        """
+        lg = self.legs[leg]
+        target = np.asarray(target_B, dtype=float)
+        if target.shape != (3,) or not np.all(np.isfinite(target)):
+            raise ValueError(f"ik_leg: target_B must be 3 finite numbers, got {target_B!r}")
+        want = lg.knee_direction if knee is None else knee
+        ref = self._reference(leg, reference_rad)
+        centre = self._centres[leg]
+        if centre is None:
+            return self._ik_numeric(leg, target, ref, want, tol_m)
+        sols = self._ik_paden_kahan(leg, target, centre, tol_m)
+        if not sols:
+            res = self._ik_numeric(leg, target, ref, want, tol_m, exact_only=False)
+            res.method = "paden-kahan"
+            res.reason = res.reason or "no exact in-limit solution"
+            return res
+        preferred = [s for s in sols if want == 0 or self.knee_direction(leg, s) == want]
+        pool = preferred or sols
+        best = min(pool, key=lambda s: float(np.sum((s - ref) ** 2)))
+        err = float(np.linalg.norm(self.foot_B(leg, best) - target))
+        return IKResult(
+            joints_rad=best,
+            reachable=True,
+            error_m=err,
+            method="paden-kahan",
+            knee_flipped=not preferred,
+            solutions=sols,
+        )
+
+    def _reference(self, leg: int, reference_rad) -> np.ndarray:
+        if reference_rad is not None:
+            return np.asarray(reference_rad, dtype=float)
+        if self.robot.theta_nor is not None:
+            return self.robot.theta_nor[leg]
+        lg = self.legs[leg]
+        return np.clip(np.zeros(3), lg.lower_rad, lg.upper_rad)
+
+    def _ik_paden_kahan(self, leg: int, target, centre, tol_m: float) -> list[np.ndarray]:
+        """All in-limit exact solutions: subproblem 3 (knee) then subproblem 2 (hip)."""
+        lg = self.legs[leg]
+        delta = float(np.linalg.norm(target - centre))
+        knees = pk.subproblem3(lg.axes_B[2], lg.points_B[2], lg.foot_B0, centre, delta)
+        out: list[np.ndarray] = []
+        for th3 in knees:
+            for th3w in _wrap_into_limits(th3, lg.lower_rad[2], lg.upper_rad[2]):
+                p = twist_apply_np(lg, np.array([0.0, 0.0, th3w]), lg.foot_B0)
+                for th1, th2 in pk.subproblem2(lg.axes_B[0], lg.axes_B[1], centre, p, target):
+                    for a in _wrap_into_limits(th1, lg.lower_rad[0], lg.upper_rad[0]):
+                        for b in _wrap_into_limits(th2, lg.lower_rad[1], lg.upper_rad[1]):
+                            s = np.array([a, b, th3w])
+                            if np.linalg.norm(self.foot_B(leg, s) - target) <= 1e3 * tol_m:
+                                out.append(s)
+        # remove duplicates (tangent cases give the same solution twice)
+        uniq: list[np.ndarray] = []
+        for s in out:
+            if all(np.max(np.abs(s - u)) > 1e-9 for u in uniq):
+                uniq.append(s)
+        return uniq
+
+    def _ik_numeric(
+        self, leg: int, target, ref, want: int, tol_m: float, exact_only: bool = True
+    ) -> IKResult:
+        """Bounded least squares from several starts (legs whose hip axes do not meet)."""
+        lg = self.legs[leg]
+        lo, hi = lg.lower_rad, lg.upper_rad
+        lo_f = np.where(np.isfinite(lo), lo, -np.pi)
+        hi_f = np.where(np.isfinite(hi), hi, np.pi)
+        starts = [np.clip(ref, lo_f, hi_f)]
+        rng = np.random.default_rng(leg)
+        starts += [lo_f + (hi_f - lo_f) * rng.random(3) for _ in range(23)]
+
+        def resid(th):
+            return self.foot_B(leg, th) - target
+
+        def jac(th):
+            return self.foot_jacobian_B(leg, th)
+
+        found: list[np.ndarray] = []
+        best, best_err = starts[0], np.inf
+        for s in starts:
+            sol = least_squares(
+                resid,
+                s,
+                jac=jac,
+                bounds=(lo_f, hi_f),
+                xtol=1e-15,
+                ftol=1e-15,
+                gtol=1e-15,
+                max_nfev=200,
+            )
+            err = float(np.linalg.norm(resid(sol.x)))
+            if err < best_err:
+                best, best_err = sol.x, err
+            if err <= tol_m:
+                found.append(sol.x)
+                if want == 0 or self.knee_direction(leg, sol.x) == want:
+                    break
+        if found:
+            preferred = [s for s in found if want == 0 or self.knee_direction(leg, s) == want]
+            pool = preferred or found
+            pick = min(pool, key=lambda s: float(np.sum((s - ref) ** 2)))
+            return IKResult(
+                joints_rad=pick,
+                reachable=True,
+                error_m=float(np.linalg.norm(resid(pick))),
+                method="numeric",
+                knee_flipped=not preferred,
+                solutions=found,
+            )
+        return IKResult(
+            joints_rad=np.asarray(best, float),
+            reachable=False,
+            error_m=best_err,
+            method="numeric",
+            reason=f"target out of reach: closest in-limit foot position is {best_err:.4g} m away",
+        )
+
+    def ik(self, base_position_W, base_rotation_W, feet_W, reference_rad=None) -> list[IKResult]:
+        """Leg IK for a body pose and four world-frame foot centres."""
+        rot = np.asarray(base_rotation_W, float)
+        feet_B = (np.asarray(feet_W, float) - np.asarray(base_position_W, float)) @ rot
+        ref = None if reference_rad is None else np.asarray(reference_rad, float).reshape(4, 3)
+        return [self.ik_leg(i, feet_B[i], None if ref is None else ref[i]) for i in range(4)]
+
+
+def _max_reach(lg: Leg, centre: np.ndarray) -> float:
+    """Largest distance from the hip centre to the foot over the knee's range."""
+    lo = lg.lower_rad[2] if np.isfinite(lg.lower_rad[2]) else -np.pi
+    hi = lg.upper_rad[2] if np.isfinite(lg.upper_rad[2]) else np.pi
+    ths = np.linspace(lo, hi, 721)
+    return max(
+        float(np.linalg.norm(twist_apply_np(lg, np.array([0, 0, t]), lg.foot_B0) - centre))
+        for t in ths
+    )
+
+
+def finalize_robot(robot: Robot) -> None:
+    """Set knee configurations, reach and the normal configuration theta_nor (section 4.2).
+
+    Knee configuration: LittleDog's "X" (front knees rearward, hind knees forward); a
+    leg whose joint limits forbid that branch at the nominal stance keeps the other one.
+    theta_nor puts each foot below its hip centre, at its zero-configuration lateral
+    offset, at ``NOMINAL_DEPTH_FRACTION`` of the leg's vertical reach.
+    """
+    kin = LegKinematics(robot)
+    thetas, reaches = [], []
+    for leg in robot.legs:
+        centre = hip_centre_B(leg)
+        if centre is None:
+            centre = leg.points_B[0]
+        reach = _max_reach(leg, centre)
+        lateral = leg.foot_B0[1] - centre[1]
+        depth = NOMINAL_DEPTH_FRACTION * np.sqrt(max(reach**2 - lateral**2, 0.0))
+        target = np.array([centre[0], leg.foot_B0[1], centre[2] - depth])
+        leg.knee_direction = -1 if leg.is_front else 1
+        res = kin.ik_leg(leg.index, target, reference_rad=np.zeros(3))
+        if res.reachable and res.knee_flipped:
+            leg.knee_direction = -leg.knee_direction
+        thetas.append(res.joints_rad)
+        reaches.append(reach)
+    robot.theta_nor = np.array(thetas)
+    robot.reach_m = np.array(reaches)
+    robot._kinematics = kin  # cached, see kinematics_of
+
+
+def kinematics_of(robot: Robot) -> LegKinematics:
+    """The (cached) :class:`LegKinematics` of a robot."""
+    kin = getattr(robot, "_kinematics", None)
+    if kin is None:
+        kin = LegKinematics(robot)
+        robot._kinematics = kin
+    return kin

@@ -1,0 +1,357 @@
+"""Quadruped robot model loaded from a URDF with Pinocchio (DESIGN.md section 2, step 1).
+
+Pinocchio's model is the single source of truth: leg chains, joint placements and axes,
+limits and inertias are read from it and from the URDF's collision geometry. A robot is
+accepted when its free-flyer root carries exactly four leg chains of three revolute joints
+each; anything else is refused with an error that says what was found.
+
+``load_robot("littledog")`` loads ``models/littledog/littledog.urdf``; the quadrupeds of
+the example-robot-data wheel (solo12, anymal, anymal_b, hyq, go1, go2, a1, b1, laikago)
+load by name from its share folder.
+"""
+
+from __future__ import annotations
+
+import sys
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from planner.errors import RobotModelError
+
+LEG_NAMES = ("FL", "FR", "HL", "HR")  # the paper's legs 1..4
+MODELS_DIR = Path(__file__).resolve().parents[1] / "models"
+
+# example-robot-data ships URDFs under <prefix>/share/example-robot-data/robots (no loader).
+_ERD_ROBOTS = {
+    "solo12": "solo_description/robots/solo12.urdf",
+    "anymal": "anymal_c_simple_description/urdf/anymal.urdf",
+    "anymal_b": "anymal_b_simple_description/robots/anymal.urdf",
+    "hyq": "hyq_description/robots/hyq_no_sensors.urdf",
+    "go1": "go1_description/urdf/go1.urdf",
+    "go2": "go2_description/urdf/go2.urdf",
+    "a1": "a1_description/urdf/a1.urdf",
+    "b1": "b1_description/urdf/b1.urdf",
+    "laikago": "laikago_description/urdf/laikago.urdf",
+}
+
+
+def erd_robots_dir() -> Path:
+    """Folder where the example-robot-data wheel installs its robot descriptions."""
+    candidates = [Path(sys.prefix) / "cmeel.prefix" / "share" / "example-robot-data" / "robots"]
+    candidates += [
+        Path(p) / "cmeel.prefix" / "share" / "example-robot-data" / "robots" for p in sys.path if p
+    ]
+    for c in candidates:
+        if c.is_dir():
+            return c
+    raise RobotModelError(
+        "example-robot-data: its share folder was not found; install it (pip install "
+        "example-robot-data) or give a URDF path"
+    )
+
+
+def robot_names() -> list[str]:
+    """Names that :func:`load_robot` accepts."""
+    return ["littledog", *sorted(_ERD_ROBOTS)]
+
+
+def resolve_urdf(name_or_path: str | Path) -> tuple[str, Path]:
+    """Return (robot name, URDF path) for a known name or a path to a URDF file."""
+    key = str(name_or_path)
+    if key == "littledog":
+        return "littledog", MODELS_DIR / "littledog" / "littledog.urdf"
+    if key in _ERD_ROBOTS:
+        return key, erd_robots_dir() / _ERD_ROBOTS[key]
+    path = Path(key)
+    if path.suffix.lower() != ".urdf" and not path.exists():
+        raise RobotModelError(
+            f"{key}: not a known robot name (known: {', '.join(robot_names())}) "
+            "and not a URDF file; give one of the names or a path to a .urdf file"
+        )
+    return path.stem, path
+
+
+@dataclass
+class Leg:
+    """One leg: three revolute joints, hip to foot, at the zero configuration in body frame.
+
+    ``axes_B[j]`` is the unit axis omega_{i,j} and ``points_B[j]`` the joint origin
+    r^0_{i,j} (paper eq. 1-2); ``foot_B0`` is the foot sphere centre r^0_i.
+    """
+
+    name: str
+    index: int  # 0-based; the paper's leg number is index + 1
+    joint_names: tuple[str, str, str]
+    joint_ids: tuple[int, int, int]  # Pinocchio joint indices
+    q_index: int  # first of the three joints in Pinocchio's q (free-flyer q has 7 first)
+    axes_B: np.ndarray  # (3, 3) unit axes
+    points_B: np.ndarray  # (3, 3) joint origins
+    foot_B0: np.ndarray  # (3,) foot sphere centre at zero joint angles
+    foot_frame: str
+    lower_rad: np.ndarray  # (3,)
+    upper_rad: np.ndarray  # (3,)
+    is_front: bool
+    is_left: bool
+    # +1: knee points forward (+x_B) of the hip-foot line, -1: rearward.
+    knee_direction: int = 0
+
+
+@dataclass
+class Robot:
+    """A 4-leg, 3-joints-per-leg quadruped read from a URDF (Pinocchio free-flyer model)."""
+
+    name: str
+    urdf_path: Path
+    model: pin.Model = field(repr=False)
+    legs: list[Leg]
+    foot_radius_m: float
+    body_box_B: np.ndarray  # (2, 3): min and max corner of the body box P in body frame
+    body_box_source: str  # "urdf collision box" or how it was estimated
+    total_mass_kg: float
+    body_mass_kg: float
+    body_com_B: np.ndarray  # (3,) COM of the root link alone
+    theta_nor: np.ndarray = field(default=None)  # (4, 3) normal configuration [rad]
+    reach_m: np.ndarray = field(default=None)  # (4,) max distance hip centre -> foot centre
+
+    @property
+    def joint_names(self) -> list[str]:
+        """The 12 leg joint names, legs in order FL, FR, HL, HR."""
+        return [n for leg in self.legs for n in leg.joint_names]
+
+    @property
+    def foot_frames(self) -> list[str]:
+        """The URDF frames at the four foot sphere centres."""
+        return [leg.foot_frame for leg in self.legs]
+
+    @property
+    def lower_rad(self) -> np.ndarray:
+        """(4, 3) lower joint limits."""
+        return np.array([leg.lower_rad for leg in self.legs])
+
+    @property
+    def upper_rad(self) -> np.ndarray:
+        """(4, 3) upper joint limits."""
+        return np.array([leg.upper_rad for leg in self.legs])
+
+    @property
+    def body_vertices_B(self) -> np.ndarray:
+        """(8, 3) vertices of the body box P (paper section 4.2) in body frame."""
+        lo, hi = self.body_box_B
+        return np.array(
+            [[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
+        )
+
+    def q_from(self, base_position_W, base_quat_xyzw, joints_rad) -> np.ndarray:
+        """Pinocchio configuration q (19,) from base pose and (4, 3) or (12,) joint angles."""
+        q = np.zeros(self.model.nq)
+        q[:3] = base_position_W
+        q[3:7] = base_quat_xyzw
+        joints = np.asarray(joints_rad, dtype=float).reshape(4, 3)
+        for leg in self.legs:
+            q[leg.q_index : leg.q_index + 3] = joints[leg.index]
+        return q
+
+    def joints_from_q(self, q) -> np.ndarray:
+        """(4, 3) leg joint angles out of a Pinocchio configuration q."""
+        return np.array([q[leg.q_index : leg.q_index + 3] for leg in self.legs])
+
+
+def _fail(path: Path, what: str) -> RobotModelError:
+    return RobotModelError(f"{path}: {what}")
+
+
+def _parse_urdf_xml(path: Path) -> ET.Element:
+    try:
+        return ET.parse(path).getroot()
+    except ET.ParseError as exc:
+        raise _fail(path, f"malformed URDF XML ({exc}); fix the XML") from None
+
+
+def _build_model(path: Path) -> pin.Model:
+    if not path.is_file():
+        raise _fail(path, "file not found; give an existing URDF path or a known robot name")
+    root = _parse_urdf_xml(path)
+    if root.tag != "robot":
+        raise _fail(path, f"root element is <{root.tag}>, a URDF needs <robot>")
+    try:
+        return pin.buildModelFromUrdf(str(path), pin.JointModelFreeFlyer())
+    except (RuntimeError, ValueError) as exc:
+        msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise _fail(path, f"Pinocchio could not read it: {msg}") from None
+
+
+def _link_geometry(root: ET.Element, link: str) -> list[tuple[str, dict, np.ndarray]]:
+    """Collision geometries of a URDF link: (kind, attributes, origin xyz)."""
+    out = []
+    for el in root.findall(f"./link[@name='{link}']/collision"):
+        geo = el.find("geometry")
+        if geo is None or len(geo) == 0:
+            continue
+        org = el.find("origin")
+        xyz = np.zeros(3)
+        if org is not None and org.get("xyz"):
+            xyz = np.array([float(v) for v in org.get("xyz").split()])
+        out.append((geo[0].tag, dict(geo[0].attrib), xyz))
+    return out
+
+
+def _find_legs(path: Path, model: pin.Model) -> list[list[int]]:
+    """Chains of joint ids from the root's children to the leaves."""
+    children: dict[int, list[int]] = {}
+    for j in range(2, model.njoints):
+        children.setdefault(model.parents[j], []).append(j)
+    chains = []
+    for start in children.get(1, []):
+        chain = [start]
+        while len(children.get(chain[-1], [])) == 1:
+            chain.append(children[chain[-1]][0])
+        if len(children.get(chain[-1], [])) > 1:
+            raise _fail(path, f"joint '{model.names[chain[-1]]}' branches; legs must be chains")
+        chains.append(chain)
+    desc = ", ".join(f"{model.names[c[0]]}: {len(c)} joints" for c in chains)
+    if len(chains) != 4:
+        raise _fail(
+            path,
+            f"found {len(chains)} leg chains from the root ({desc}); "
+            "stratawalk plans for quadrupeds with exactly 4 legs of 3 revolute joints",
+        )
+    for c in chains:
+        kinds = [model.joints[j].shortname() for j in c]
+        if len(c) != 3 or not all("JointModelR" in k and "Unbounded" not in k for k in kinds):
+            raise _fail(
+                path,
+                f"leg starting at '{model.names[c[0]]}' has joints {kinds}; "
+                "each leg needs exactly 3 revolute joints",
+            )
+    return chains
+
+
+def _foot_frame(path: Path, model: pin.Model, data: pin.Data, knee_id: int) -> int:
+    """Return the frame below the knee farthest from it (preferring names with "foot")."""
+    candidates = [
+        i
+        for i, f in enumerate(model.frames)
+        if f.parentJoint == knee_id and f.type in (pin.FrameType.BODY, pin.FrameType.FIXED_JOINT)
+    ]
+    named = [i for i in candidates if "foot" in model.frames[i].name.lower()]
+    pool = named or candidates
+    if not pool:
+        raise _fail(path, f"no frame below joint '{model.names[knee_id]}' to use as the foot")
+    knee = data.oMi[knee_id].translation
+    dist = [np.linalg.norm(data.oMf[i].translation - knee) for i in pool]
+    best = max(dist)
+    # several frames at the same point (fixed joint + child link): prefer the BODY frame
+    same = [i for i, d in zip(pool, dist, strict=True) if abs(d - best) < 1e-9]
+    same.sort(key=lambda i: model.frames[i].type != pin.FrameType.BODY)
+    return same[0]
+
+
+def load_robot(name_or_path: str | Path, foot_radius_m: float | None = None) -> Robot:
+    """Load a quadruped by name (``littledog``, ``solo12``, ...) or from a URDF path.
+
+    Raises :class:`RobotModelError` (one line naming the file and the problem) for a
+    missing file, malformed XML, or a robot that is not 4 legs x 3 revolute joints.
+    """
+    name, path = resolve_urdf(name_or_path)
+    model = _build_model(path)
+    root = _parse_urdf_xml(path)
+    data = model.createData()
+    q0 = pin.neutral(model)
+    pin.forwardKinematics(model, data, q0)
+    pin.updateFramePlacements(model, data)
+
+    chains = _find_legs(path, model)
+    legs: list[Leg] = []
+    for chain in chains:
+        axes = []
+        for j in chain:
+            jm = model.joints[j]
+            local = {"X": [1, 0, 0], "Y": [0, 1, 0], "Z": [0, 0, 1]}.get(jm.shortname()[-1])
+            if local is None:  # revolute unaligned
+                local = np.asarray(jm.extract().axis).ravel()
+            axes.append(data.oMi[j].rotation @ np.asarray(local, float))
+        foot_id = _foot_frame(path, model, data, chain[2])
+        hip = data.oMi[chain[0]].translation
+        legs.append(
+            Leg(
+                name="",
+                index=-1,
+                joint_names=tuple(model.names[j] for j in chain),
+                joint_ids=tuple(chain),
+                q_index=model.joints[chain[0]].idx_q,
+                axes_B=np.array(axes),
+                points_B=np.array([data.oMi[j].translation.copy() for j in chain]),
+                foot_B0=data.oMf[foot_id].translation.copy(),
+                foot_frame=model.frames[foot_id].name,
+                lower_rad=model.lowerPositionLimit[[model.joints[j].idx_q for j in chain]].copy(),
+                upper_rad=model.upperPositionLimit[[model.joints[j].idx_q for j in chain]].copy(),
+                is_front=bool(hip[0] > 0),
+                is_left=bool(hip[1] > 0),
+            )
+        )
+    order = {(True, True): 0, (True, False): 1, (False, True): 2, (False, False): 3}
+    slots = [order[(leg.is_front, leg.is_left)] for leg in legs]
+    if sorted(slots) != [0, 1, 2, 3]:
+        found = ", ".join(
+            f"{leg.joint_names[0]} at {np.round(leg.points_B[0], 3).tolist()}" for leg in legs
+        )
+        raise _fail(path, f"hips are not one per quadrant (front/hind x left/right): {found}")
+    for leg, slot in zip(legs, slots, strict=True):
+        leg.index, leg.name = slot, LEG_NAMES[slot]
+    legs.sort(key=lambda leg: leg.index)
+
+    # foot radius: a sphere collision on the foot's link (or the URDF link named as the frame)
+    radius = foot_radius_m
+    if radius is None:
+        radius = 0.0
+        for leg in legs:
+            frame = model.frames[model.getFrameId(leg.foot_frame)]
+            for link in {frame.name, model.frames[frame.parentFrame].name}:
+                for kind, attrib, xyz in _link_geometry(root, link):
+                    if kind == "sphere" and np.linalg.norm(xyz) < 1e-6:
+                        radius = max(radius, float(attrib["radius"]))
+
+    root_link = model.frames[2].name if len(model.frames) > 2 else ""
+    root_link = next(
+        (f.name for f in model.frames if f.parentJoint == 1 and f.type == pin.FrameType.BODY),
+        root_link,
+    )
+    boxes = [
+        (attrib, xyz) for kind, attrib, xyz in _link_geometry(root, root_link) if kind == "box"
+    ]
+    if boxes:
+        lo = np.full(3, np.inf)
+        hi = np.full(3, -np.inf)
+        for attrib, xyz in boxes:
+            size = np.array([float(v) for v in attrib["size"].split()])
+            lo, hi = np.minimum(lo, xyz - size / 2), np.maximum(hi, xyz + size / 2)
+        box, source = np.array([lo, hi]), f"collision box of link '{root_link}'"
+    else:
+        hips = np.array([leg.points_B[0] for leg in legs])
+        lo = hips.min(axis=0) - [0.05, 0.02, 0.05]
+        hi = hips.max(axis=0) + [0.05, 0.02, 0.05]
+        box = np.array([lo, hi])
+        source = "estimated from the hip positions (no collision box on the root link)"
+
+    inertia = model.inertias[1]
+    robot = Robot(
+        name=name,
+        urdf_path=path,
+        model=model,
+        legs=legs,
+        foot_radius_m=float(radius),
+        body_box_B=box,
+        body_box_source=source,
+        total_mass_kg=float(sum(inert.mass for inert in model.inertias)),
+        body_mass_kg=float(inertia.mass),
+        body_com_B=np.asarray(inertia.lever).copy(),
+    )
+    # Late import: kinematics depends on this module's dataclasses.
+    from planner.kinematics import finalize_robot
+
+    finalize_robot(robot)
+    return robot
