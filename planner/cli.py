@@ -1,0 +1,108 @@
+"""The ``stratawalk`` command line (DESIGN.md section 3)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+import numpy as np
+
+from planner.errors import PlannerError
+
+
+def robot_summary(robot) -> str:
+    """Human-readable summary: legs, joints, limits, masses, reach, normal stance."""
+    from planner.kinematics import kinematics_of
+
+    kin = kinematics_of(robot)
+    lines = [
+        f"robot {robot.name}  ({robot.urdf_path})",
+        f"  total mass {robot.total_mass_kg:.3f} kg, body {robot.body_mass_kg:.3f} kg "
+        f"(COM {np.round(robot.body_com_B, 4).tolist()} m in body frame)",
+        f"  foot radius {robot.foot_radius_m:.4f} m; body box P [m, body frame] "
+        f"min {np.round(robot.body_box_B[0], 4).tolist()} max "
+        f"{np.round(robot.body_box_B[1], 4).tolist()} ({robot.body_box_source})",
+    ]
+    for leg in robot.legs:
+        knee = "forward" if leg.knee_direction > 0 else "rearward"
+        lines.append(
+            f"  leg {leg.index + 1} {leg.name}: foot frame '{leg.foot_frame}', reach "
+            f"{robot.reach_m[leg.index]:.3f} m, knee points {knee}"
+        )
+        for j in range(3):
+            lines.append(
+                f"    {leg.joint_names[j]:<22} axis {np.round(leg.axes_B[j], 3).tolist()} at "
+                f"{np.round(leg.points_B[j], 4).tolist()}  limits [{leg.lower_rad[j]:+.3f}, "
+                f"{leg.upper_rad[j]:+.3f}] rad  theta_nor {robot.theta_nor[leg.index, j]:+.3f}"
+            )
+    feet = kin.feet_B(robot.theta_nor)
+    stand = -feet[:, 2].max() + robot.foot_radius_m
+    com = kin.com_B(robot.theta_nor)
+    lines.append(
+        f"  standing pose (theta_nor on flat ground): body origin {stand:.3f} m above ground, "
+        f"whole-body COM {np.round(com, 4).tolist()} m in body frame, body clearance "
+        f"{stand + robot.body_box_B[0, 2]:.3f} m"
+    )
+    lines.append("  feet at theta_nor [m, body frame]: " + str(np.round(feet, 4).tolist()))
+    return "\n".join(lines)
+
+
+def _cmd_robot(args) -> int:
+    from planner.robot import load_robot
+
+    print(robot_summary(load_robot(args.robot)))
+    return 0
+
+
+def _cmd_terrain(args) -> int:
+    from planner.terrain import list_terrains, load_terrain
+
+    if args.name is None:
+        print("\n".join(list_terrains()))
+        return 0
+    terrain = load_terrain(args.name)
+    print(f"terrain {terrain.name}: bounds {terrain.bounds}")
+    if args.png:
+        from planner.terrain_plot import plot_top_view
+
+        plot_top_view(terrain, args.png)
+        print(f"wrote {args.png}")
+    return 0
+
+
+def _cmd_demo(args) -> int:
+    from planner.robot import load_robot
+
+    robot = load_robot("littledog")
+    print(robot_summary(robot))
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Argument parser of the ``stratawalk`` command."""
+    p = argparse.ArgumentParser(prog="stratawalk", description=__doc__)
+    sub = p.add_subparsers(dest="command", required=True)
+    r = sub.add_parser("robot", help="summary of a robot: legs, joints, limits, masses, reach")
+    r.add_argument("robot", help="littledog, an example-robot-data name, or a URDF path")
+    r.set_defaults(func=_cmd_robot)
+    t = sub.add_parser("terrain", help="list terrains, or describe/draw one")
+    t.add_argument("name", nargs="?", help="terrain name (terrains/NAME.yaml) or YAML path")
+    t.add_argument("--png", help="write a top view with height colours to this PNG")
+    t.set_defaults(func=_cmd_terrain)
+    d = sub.add_parser("demo", help="the main job: LittleDog on a rough course")
+    d.set_defaults(func=_cmd_demo)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point; planner errors become a one-line message and exit status 2."""
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except PlannerError as exc:
+        print(f"stratawalk: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())
