@@ -1,0 +1,464 @@
+"""The shared machinery of the Theta problems (paper sections 7.2-7.5).
+
+Each Theta problem is declared once per (robot, terrain, support pattern) as a CasADi NLP
+
+    min_x f(x, p)   s.t.   lbx <= x <= ubx,   lbg <= g(x, p) <= ubg,
+
+with exact first and second derivatives (CasADi's algorithmic differentiation, SX graphs),
+and solved many times by IPOPT with new parameters p and the previous solution as the
+warm start (the pattern of rockit's ``repeated_solve``). The constraints come in named
+groups so that a failed solve can say which one it could not meet.
+
+The paper's objective is a product ``sigma = -prod_k sigma_k^gamma_k`` of positive terms.
+IPOPT is given the equivalent ``-sum_k gamma_k log sigma_k``: log is increasing, so both
+rank any two configurations the same way and have the same minimisers, while the sum has
+a far better conditioned Hessian. Terms that could turn non-positive (sigma1, sigma2,
+sigma5) are slack variables bounded below by ``sigma_floor`` and tied to their
+expression by an equality, so the logarithm is always defined.
+
+A solve returns a :class:`ThetaSolution`, whose :meth:`~ThetaSolution.max_violation`
+recomputes every constraint with numpy and Pinocchio, not with the CasADi graph the solver
+saw. A solution is called feasible only when that check passes.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+import pinocchio as pin
+
+from planner import statics
+from planner.kinematics import kinematics_of
+from planner.lie import coords_from_pose, pose_from_coords, rotation_from_vector_ca
+from planner.state import State, contact_mask
+
+FEASIBILITY_TOL = 1e-6  # [m, rad, N]: an independent violation above this is infeasible
+
+
+@dataclass
+class ThetaOptions:
+    """Settings shared by the Theta problems; what each trades off.
+
+    weights : gamma_1..gamma_5 of the paper's objective (section 7.3). Raise gamma_4 to
+        follow the COM target more tightly; raise gamma_3 for stances nearer theta_nor.
+    clearance_m : delta_c, the least height of every vertex of the body box P above the
+        terrain (constraint b). Lower it when a step or barrier needs the belly closer.
+    forces : impose inequalities (d), (e) on the eq. 5 forces (the paper's default).
+    min_normal_force_frac : (d) asks F_i.n_i >= this fraction of m g (strictly positive).
+    sigma_floor : lower bound of sigma1, sigma2, sigma5 (orientation stays forward and up).
+    whole_body_com : whole-body centre of mass (default) or the body link's (the paper).
+    max_iter, tol : IPOPT's iteration cap and tolerance. If a problem fails with
+        "Maximum_Iterations_Exceeded", raise max_iter or start nearer (warm start).
+    """
+
+    weights: tuple[float, float, float, float, float] = (1.0, 1.0, 1.0, 2.0, 0.5)
+    clearance_m: float = 0.02
+    forces: bool = True
+    min_normal_force_frac: float = 0.02
+    sigma_floor: float = 0.05
+    whole_body_com: bool = True
+    friction_eps_N: float = 1e-3
+    max_iter: int = 150
+    tol: float = 1e-8
+    slope_limit: bool = True
+    com_length_m: float = 0.01  # sigma4 = exp(-|r_c - r_c*|^2 / (2 com_length_m^2))
+    target_length_m: float = 0.01  # Theta3 sigma1 = exp(-|r - r_t|^2 / (2 target_length_m^2))
+    joint_scale_rad: float = 1.0  # sigma3 = exp(-|theta - theta_nor|^2 / (2 joint_scale^2))
+
+
+@dataclass
+class ThetaSolution:
+    """The outcome of one Theta solve (data, as qpsolvers' ``Solution``).
+
+    ``feasible`` is decided by :meth:`max_violation` (numpy + Pinocchio), not by IPOPT's
+    status alone; ``status`` is IPOPT's return status; ``diagnosis`` says what went wrong.
+    """
+
+    problem: str
+    status: str
+    feasible: bool
+    state: State | None
+    objective: float
+    objective_terms: dict[str, float]
+    iterations: int
+    solve_time_s: float
+    build_time_s: float
+    diagnosis: str = ""
+    violations: dict[str, float] = field(default_factory=dict)
+    x: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def joints_rad(self) -> np.ndarray | None:
+        """(4, 3) joint angles of the solution."""
+        return None if self.state is None else self.state.joints_rad
+
+    @property
+    def forces_W(self) -> np.ndarray | None:
+        """(4, 3) eq. 5 contact forces [N] of the solution (zero for non-support feet)."""
+        return None if self.state is None else self.state.forces_W
+
+    def max_violation(self) -> float:
+        """Largest constraint violation, recomputed independently of the solver."""
+        return max(self.violations.values(), default=0.0)
+
+
+class ConstraintCheck:
+    """Independent numeric check of a configuration (numpy, Pinocchio, statics).
+
+    Each group returns a violation (0 when satisfied) in its own unit: metres for
+    positions, radians for angles, newtons for forces.
+    """
+
+    def __init__(self, robot, terrain, options: ThetaOptions):
+        self.robot = robot
+        self.terrain = terrain
+        self.options = options
+        self.model = robot.model
+        self.data = robot.model.createData()
+        self.foot_ids = [self.model.getFrameId(f) for f in robot.foot_frames]
+
+    def foot_centres_W(self, state: State) -> np.ndarray:
+        """(4, 3) foot sphere centres by Pinocchio forward kinematics."""
+        q = self.robot.q_from(state.base_position_W, state.base_quaternion_xyzw, state.joints_rad)
+        pin.framesForwardKinematics(self.model, self.data, q)
+        return np.array([self.data.oMf[f].translation for f in self.foot_ids])
+
+    def com_W(self, state: State) -> np.ndarray:
+        """Centre of mass by Pinocchio (whole body) or the body link's (paper)."""
+        if not self.options.whole_body_com:
+            return state.base_position_W + state.base_rotation_W @ self.robot.body_com_B
+        q = self.robot.q_from(state.base_position_W, state.base_quaternion_xyzw, state.joints_rad)
+        return pin.centerOfMass(self.model, self.data, q)
+
+    def joint_limits(self, state: State) -> float:
+        """Largest excursion of a joint past its limits [rad] (constraint c)."""
+        lo, hi = self.robot.lower_rad, self.robot.upper_rad
+        return float(max(np.max(lo - state.joints_rad), np.max(state.joints_rad - hi), 0.0))
+
+    def clearance(self, state: State) -> float:
+        """delta_c - min over P of f_T [m], if positive (constraint b)."""
+        verts_W = self.robot.body_vertices_B @ state.base_rotation_W.T + state.base_position_W
+        f = self.terrain.f_T(verts_W)
+        return float(max(np.max(self.options.clearance_m - f), 0.0))
+
+    def orientation(self, state: State) -> float:
+        """|theta omega| - pi [rad], if positive (constraint a)."""
+        phi = coords_from_pose(state.pose)[3:]
+        return float(max(np.linalg.norm(phi) - np.pi, 0.0))
+
+    def contacts(self, state: State, legs) -> float:
+        """Stance feet: Pinocchio's sphere centre equals contact point + rho n."""
+        from planner.contact import foot_centre_from_contact
+
+        centres = self.foot_centres_W(state)
+        want = foot_centre_from_contact(self.terrain, state.feet_W, self.robot.foot_radius_m)
+        legs = list(legs)
+        if not legs:
+            return 0.0
+        return float(np.max(np.linalg.norm(centres[legs] - want[legs], axis=1)))
+
+    def on_terrain(self, state: State, legs) -> float:
+        """|f_T(r_i)| of the contact points of the given legs."""
+        legs = list(legs)
+        if not legs:
+            return 0.0
+        return float(np.max(np.abs(self.terrain.f_T(state.feet_W[legs]))))
+
+    def slope(self, state: State, legs, mu: float) -> float:
+        """tan(slope) - mu at the contact points (section 7.4 inequality), if positive."""
+        legs = list(legs)
+        if not legs or not self.options.slope_limit:
+            return 0.0
+        n = self.terrain.normal(state.feet_W[legs])
+        tan = np.sqrt(np.maximum(1 - n[:, 2] ** 2, 0.0)) / np.maximum(n[:, 2], 1e-12)
+        return float(max(np.max(tan - mu), 0.0))
+
+    def forces(self, state: State, support, mu: float) -> tuple[float, np.ndarray]:
+        """Violation of (d), (e) for the eq. 5 forces [N], and the forces."""
+        com = self.com_W(state)
+        eq = statics.equilibrating_forces(state.feet_W, com, self.robot.total_mass_kg, support)
+        if eq.degenerate:
+            return float("inf"), eq.forces
+        normals = self.terrain.normal(state.feet_W)
+        fmin = self.options.min_normal_force_frac * self.robot.total_mass_kg * 9.81
+        worst = 0.0
+        for i in support:
+            fn = float(eq.forces[i] @ normals[i])
+            ft = np.linalg.norm(eq.forces[i] - fn * normals[i])
+            worst = max(worst, fmin - fn, ft - mu * fn)
+        return float(worst), eq.forces
+
+
+class ThetaProblem:
+    """Base class: variables, parameters, named constraint groups, objective, IPOPT.
+
+    Subclasses implement :meth:`_declare`, which fills ``self._x``, ``self._p``, the
+    constraint groups and the objective terms, and :meth:`_state_from_x`.
+    """
+
+    name = "Theta"
+
+    def __init__(self, robot, terrain, options: ThetaOptions | None = None, mu: float = 0.7):
+        self.robot = robot
+        self.terrain = terrain
+        self.options = options or ThetaOptions()
+        self.mu = float(mu)
+        self.kin = kinematics_of(robot)
+        self.check = ConstraintCheck(robot, terrain, self.options)
+        self._xs: list[tuple[str, ca.SX, np.ndarray, np.ndarray]] = []
+        self._ps: list[tuple[str, ca.SX]] = []
+        self._groups: list[tuple[str, ca.SX, np.ndarray, np.ndarray]] = []
+        self._terms: list[tuple[str, float, ca.SX]] = []
+        t0 = time.perf_counter()
+        self._declare()
+        self._build()
+        self.build_time_s = time.perf_counter() - t0
+        self._last_x: np.ndarray | None = None
+        self._last_lam_g: np.ndarray | None = None
+
+    # ---- declaration helpers ----------------------------------------------------------
+    def var(self, name: str, n: int, lb=-np.inf, ub=np.inf) -> ca.SX:
+        """A decision variable block with bounds."""
+        x = ca.SX.sym(name, n)
+        self._xs.append(
+            (name, x, np.broadcast_to(lb, n).astype(float), np.broadcast_to(ub, n).astype(float))
+        )
+        return x
+
+    def par(self, name: str, n: int) -> ca.SX:
+        """A parameter block (set at each solve)."""
+        p = ca.SX.sym(name, n)
+        self._ps.append((name, p))
+        return p
+
+    def constrain(self, name: str, expr, lb=0.0, ub=0.0) -> None:
+        """A named group of constraints lb <= expr <= ub."""
+        expr = ca.vec(expr)
+        n = expr.numel()
+        self._groups.append(
+            (name, expr, np.broadcast_to(lb, n).astype(float), np.broadcast_to(ub, n).astype(float))
+        )
+
+    def maximise_log(self, name: str, weight: float, sigma) -> None:
+        """Add gamma * log(sigma) to the objective (the paper's sigma^gamma factor)."""
+        if weight:
+            self._terms.append((name, float(weight), sigma))
+
+    def rotation(self, phi):
+        """R(phi) from the rotation-vector half of eps(g) (section 4.7)."""
+        return rotation_from_vector_ca(phi)
+
+    # ---- building and solving ----------------------------------------------------------
+    def _declare(self) -> None:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _build(self) -> None:
+        x = ca.vertcat(*[v for _, v, _, _ in self._xs])
+        p = ca.vertcat(*[v for _, v in self._ps])
+        g = ca.vertcat(*[e for _, e, _, _ in self._groups])
+        f = -sum(w * _log(s) for _, w, s in self._terms)
+        self._x_sym, self._p_sym = x, p
+        self.lbx = np.concatenate([lb for _, _, lb, _ in self._xs])
+        self.ubx = np.concatenate([ub for _, _, _, ub in self._xs])
+        self.lbg = np.concatenate([lb for _, _, lb, _ in self._groups])
+        self.ubg = np.concatenate([ub for _, _, _, ub in self._groups])
+        self._x_slices = {}
+        k = 0
+        for name, v, _, _ in self._xs:
+            self._x_slices[name] = slice(k, k + v.numel())
+            k += v.numel()
+        self._g_slices = {}
+        k = 0
+        for name, e, _, _ in self._groups:
+            self._g_slices[name] = slice(k, k + e.numel())
+            k += e.numel()
+        self._p_slices = {}
+        k = 0
+        for name, v in self._ps:
+            self._p_slices[name] = slice(k, k + v.numel())
+            k += v.numel()
+        opts = {
+            "print_time": False,
+            "ipopt": {
+                "print_level": 0,
+                "sb": "yes",
+                "tol": self.options.tol,
+                "constr_viol_tol": 1e-9,
+                "acceptable_tol": 1e-6,
+                "acceptable_constr_viol_tol": 1e-8,
+                "max_iter": self.options.max_iter,
+                "mu_strategy": "adaptive",
+                "hessian_approximation": "exact",
+            },
+        }
+        self.solver = ca.nlpsol(self.name, "ipopt", {"x": x, "p": p, "f": f, "g": g}, opts)
+        self._terms_fun = ca.Function(
+            "terms",
+            [x, p],
+            [ca.vertcat(*[s for _, _, s in self._terms]) if self._terms else ca.DM.zeros(0)],
+        )
+        self._g_fun = ca.Function("g", [x, p], [g])
+        self._f_fun = ca.Function("f", [x, p], [f])
+
+    def objective_at(self, x: np.ndarray, p: np.ndarray) -> float:
+        """The objective -sum gamma_k log sigma_k at a decision vector."""
+        return float(self._f_fun(x, p))
+
+    def pack_params(self, values: dict[str, np.ndarray]) -> np.ndarray:
+        """Parameter vector from a dict of named blocks (every block must be given)."""
+        out = np.zeros(self._p_sym.numel())
+        for name, sl in self._p_slices.items():
+            if name not in values:
+                raise KeyError(f"{self.name}: parameter '{name}' missing")
+            out[sl] = np.asarray(values[name], dtype=float).ravel()
+        return out
+
+    def x_block(self, x: np.ndarray, name: str) -> np.ndarray:
+        """A named block of a decision vector."""
+        return np.asarray(x, dtype=float)[self._x_slices[name]]
+
+    def solve_packed(self, p: np.ndarray, x0: np.ndarray) -> ThetaSolution:
+        """Run IPOPT from ``x0`` and check the result independently."""
+        x0 = np.clip(x0, self.lbx, self.ubx)
+        t0 = time.perf_counter()
+        res = self.solver(x0=x0, p=p, lbx=self.lbx, ubx=self.ubx, lbg=self.lbg, ubg=self.ubg)
+        solve_time = time.perf_counter() - t0
+        st = self.solver.stats()
+        x = np.array(res["x"]).ravel()
+        status = str(st.get("return_status", "unknown"))
+        state = self._state_from_x(x, p)
+        violations = self._violations(state, x, p)
+        worst = max(violations.values(), default=0.0)
+        feasible = bool(np.isfinite(worst) and worst <= FEASIBILITY_TOL)
+        terms = np.array(self._terms_fun(x, p)).ravel()
+        term_dict = {name: float(v) for (name, _, _), v in zip(self._terms, terms, strict=True)}
+        diagnosis = ""
+        if not feasible:
+            worst_group = max(violations, key=violations.get) if violations else "?"
+            diagnosis = (
+                f"{self.name}: IPOPT status {status}; worst constraint '{worst_group}' "
+                f"violated by {violations.get(worst_group, float('nan')):.3g}"
+            )
+            diagnosis += self._explain(worst_group)
+        if feasible:
+            self._last_x = x
+        return ThetaSolution(
+            problem=self.name,
+            status=status,
+            feasible=feasible,
+            state=state,
+            objective=float(res["f"]),
+            objective_terms=term_dict,
+            iterations=int(st.get("iter_count", -1)),
+            solve_time_s=solve_time,
+            build_time_s=self.build_time_s,
+            diagnosis=diagnosis,
+            violations=violations,
+            x=x,
+        )
+
+    def solver_violations(self, x: np.ndarray, p: np.ndarray) -> dict[str, float]:
+        """Violation of each group as the solver's CasADi graph sees it (for diagnosis)."""
+        g = np.array(self._g_fun(x, p)).ravel()
+        out = {}
+        for name, sl in self._g_slices.items():
+            v = np.maximum(self.lbg[sl] - g[sl], g[sl] - self.ubg[sl])
+            out[name] = float(max(np.max(v, initial=0.0), 0.0))
+        return out
+
+    def _explain(self, group: str) -> str:
+        hints = {
+            "contact": ": a stance foot is out of reach of this body pose",
+            "com": ": the COM target cannot be reached with these footholds",
+            "clearance": ": the body box P would touch the terrain; lower clearance_m?",
+            "forces": ": no eq. 5 forces inside the friction cones; the COM is outside the"
+            " support or the slope too steep",
+            "foot_on_terrain": ": the swing foot cannot reach the terrain",
+            "slope": ": every reachable foothold is steeper than atan(mu)",
+        }
+        for key, text in hints.items():
+            if group.startswith(key):
+                return text
+        return ""
+
+    # ---- to be provided by the problems ------------------------------------------------
+    def _state_from_x(self, x: np.ndarray, p: np.ndarray) -> State:  # pragma: no cover
+        raise NotImplementedError
+
+    def _violations(self, state: State, x, p) -> dict[str, float]:  # pragma: no cover
+        raise NotImplementedError
+
+
+# ---- shared symbolic pieces ----------------------------------------------------------------
+
+
+def _log(sigma):
+    """log(sigma), simplified for exp(...) terms so the objective stays polynomial."""
+    if sigma.is_op(ca.OP_EXP):
+        return sigma.dep(0)
+    return ca.log(sigma)
+
+
+def foot_centres_W_ca(problem: ThetaProblem, p_W, R_W, joints12):
+    """(3 x 4) foot sphere centres in world frame (eq. 2 then the base pose)."""
+    return problem.kin.feet_W_ca(p_W, R_W, joints12)
+
+
+def com_W_ca(problem: ThetaProblem, p_W, R_W, joints12):
+    """Centre of mass in world frame (whole-body or body link only)."""
+    return p_W + ca.mtimes(
+        R_W, problem.kin.com_B_ca(joints12, whole_body=problem.options.whole_body_com)
+    )
+
+
+def gaussian_ca(v, length: float):
+    """exp(-|v|^2 / (2 length^2)): a decreasing function of the distance |v|.
+
+    The paper's closeness terms are 1 / (1 + |v|) (sigma3, sigma4) and an unspecified
+    decreasing h_m (Theta3 sigma1). Any decreasing function of the same distance plays the
+    same role; this one makes the term's logarithm a convex quadratic, which IPOPT
+    handles far better than log(1 + |v|) (concave in |v|, non-smooth at 0).
+    """
+    return ca.exp(-ca.sumsqr(v) / (2 * length**2))
+
+
+def sigma3_ca(d_theta, options: ThetaOptions):
+    """sigma3 of sections 7.2-7.5: joints near theta_nor, K = I / joint_scale_rad."""
+    return gaussian_ca(d_theta, options.joint_scale_rad)
+
+
+def state_from_pose_coords(eps: np.ndarray, feet_W, joints, stratum: int, support) -> State:
+    """A :class:`State` from compact exponential coordinates eps = [p, phi]."""
+    g = pose_from_coords(eps)
+    return State(g[:3, 3], g[:3, :3], feet_W, joints, stratum=stratum, support=tuple(support))
+
+
+def stance_legs(stratum: int) -> list[int]:
+    """0-based legs on the terrain in a stratum."""
+    return [int(i) for i in np.flatnonzero(contact_mask(stratum))]
+
+
+def terrain_height_function(terrain) -> ca.Function:
+    """CasADi function (x, y) -> (z_T, grad z_T) with exact derivatives of the terrain."""
+    xy = ca.SX.sym("xy", 2)
+    z = terrain.height_ca(xy[0], xy[1])
+    return ca.Function("terrain_height", [xy], [z, ca.gradient(z, xy)])
+
+
+def sphere_contact_ca(height_fun: ca.Function, centre_W, radius_m: float):
+    """A foot sphere resting on the terrain below its centre (sections 4.4-4.5, 7.4).
+
+    Returns (gap, contact_W, normal_W, slope2): ``gap = 0`` puts the sphere on the plane
+    tangent to the terrain below its centre (c_z - z_T - rho sqrt(1 + |grad z_T|^2));
+    the contact point is c - rho n with n the pseudo-normal there; ``slope2`` is
+    tan^2 of the terrain's inclination, bounded by mu^2 in section 7.4.
+    """
+    z, grad = height_fun(centre_W[:2])
+    slope2 = ca.sumsqr(grad)
+    root = ca.sqrt(1 + slope2)
+    normal = ca.vertcat(-grad[0], -grad[1], 1) / root
+    gap = centre_W[2] - z - radius_m * root
+    return gap, centre_W - radius_m * normal, normal, slope2

@@ -1,0 +1,68 @@
+"""Theta1, hard persuasion (paper section 7.2, eq. 7).
+
+The centre of mass is fixed at a point r_c* of the trajectory; only the orientation (and,
+through the footholds, the joints) is searched. Same variables and constraints as
+:class:`~planner.problems.theta2.Theta2` plus the equality COM = r_c*. With footholds and
+COM fixed the eq. 5 forces are fixed too, so (as the paper says) they are checked once
+before solving: if they leave the cones, no orientation can help and the solve is skipped.
+Objective: sigma1 * sigma2 * sigma3 (as logs).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from planner import statics
+from planner.problems.base import ThetaSolution
+from planner.problems.theta2 import Theta2
+from planner.state import State
+
+
+class Theta1(Theta2):
+    """Hard persuasion: COM pinned to r_c*, orientation searched (section 7.2)."""
+
+    name = "Theta1"
+    fix_com = True
+
+    def force_precheck(self, start: State, rc_star_W) -> tuple[bool, str]:
+        """Whether the eq. 5 forces at COM r_c* satisfy (d) and (e) (section 7.2)."""
+        eq = statics.equilibrating_forces(
+            start.feet_W, rc_star_W, self.robot.total_mass_kg, self.support
+        )
+        if eq.degenerate:
+            return False, f"degenerate support: {eq.message}"
+        normals = self.terrain.normal(start.feet_W)
+        fmin = self.options.min_normal_force_frac * self.robot.total_mass_kg * 9.81
+        for i in self.support:
+            fn = float(eq.forces[i] @ normals[i])
+            ft = float(np.linalg.norm(eq.forces[i] - fn * normals[i]))
+            if fn < fmin:
+                return False, f"leg {i + 1}: eq. 5 normal force {fn:.3g} N below {fmin:.3g} N"
+            if ft > self.mu * fn:
+                return False, f"leg {i + 1}: eq. 5 force outside the friction cone"
+        return True, ""
+
+    def solve(self, start: State, rc_star_W, u_f, u_n) -> ThetaSolution:
+        """Theta1(r_c*, tau, r_1*..r_4*, i_f) of eq. 7, warm-started at ``start``."""
+        if self.options.forces:
+            ok, why = self.force_precheck(start, rc_star_W)
+            if not ok:
+                return ThetaSolution(
+                    problem=self.name,
+                    status="Infeasible_Forces",
+                    feasible=False,
+                    state=None,
+                    objective=float("inf"),
+                    objective_terms={},
+                    iterations=0,
+                    solve_time_s=0.0,
+                    build_time_s=self.build_time_s,
+                    diagnosis=f"Theta1: COM target r_c* cannot be held: {why}",
+                    violations={"forces": float("inf")},
+                )
+        t0 = time.perf_counter()
+        sol = super().solve(start, rc_star_W, u_f, u_n)
+        sol.solve_time_s = time.perf_counter() - t0
+        return sol

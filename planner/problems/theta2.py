@@ -1,0 +1,204 @@
+"""Theta2, soft persuasion (paper section 7.3, eq. 8).
+
+Find a point on the current leaf of S0 (all four footholds fixed) whose centre of mass is
+near a target r_c*, with the body parallel to the terrain and facing along tau.
+
+Decision variables: the body pose as compact exponential coordinates eps = [p, phi]
+(section 4.7) and the twelve joint angles. Where the paper recovers the joints by inverse
+kinematics inside the objective (and asks fmincon for a zero imaginary part), here the
+joints are variables tied to the footholds by the forward kinematics equalities
+FK_i(p, phi, theta_i) = r_i* + rho n_i: the same leaf, with smooth exact derivatives;
+reachability and joint limits become ordinary constraints and bounds.
+
+Constraints (section 7.3): (a) |phi| <= pi, (b) every vertex of P at least delta_c above
+the terrain, (c) joint limits, (d) F_i.n_i > 0 and (e) friction cones for the eq. 5 forces
+of the weight-carrying feet (switchable). Objective: sigma1 (forward axis along u_f),
+sigma2 (up axis along u_n), sigma3 (joints near theta_nor), sigma4 (COM near r_c*),
+sigma5 (forces inside the cones), combined as a weighted sum of logs (see base).
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from planner import statics
+from planner.lie import coords_from_pose
+from planner.problems.base import (
+    ThetaOptions,
+    ThetaProblem,
+    ThetaSolution,
+    com_W_ca,
+    gaussian_ca,
+    sigma3_ca,
+    state_from_pose_coords,
+)
+from planner.state import S0, State
+
+
+class Theta2(ThetaProblem):
+    """Soft persuasion on a leaf of S0, built once per support pattern."""
+
+    name = "Theta2"
+    fix_com = False
+
+    def __init__(self, robot, terrain, support=(0, 1, 2, 3), options=None, mu: float = 0.7):
+        self.support = tuple(sorted(int(i) for i in support))
+        if len(self.support) not in (3, 4):
+            raise ValueError(f"support must name 3 or 4 legs, got {support!r}")
+        super().__init__(robot, terrain, options or ThetaOptions(), mu)
+
+    def _declare(self) -> None:
+        o, r = self.options, self.robot
+        lo, hi = r.lower_rad.ravel(), r.upper_rad.ravel()
+        pos = self.var("p", 3)
+        phi = self.var("phi", 3, -np.pi, np.pi)
+        th = self.var("theta", 12, lo, hi)
+        s1 = self.var("s1", 1, o.sigma_floor, 1.0)
+        s2 = self.var("s2", 1, o.sigma_floor, 1.0)
+        rc = self.par("rc_star", 3)
+        feet = self.par("feet_W", 12)  # contact points r_i*
+        centres = self.par("centres_W", 12)  # sphere centres r_i* + rho n_i
+        normals = self.par("normals_W", 12)
+        u_f = self.par("u_f", 3)
+        u_n = self.par("u_n", 3)
+
+        R = self.rotation(phi)
+        self.constrain("contact", ca.vec(self.kin.feet_W_ca(pos, R, th)) - centres)
+        self.constrain("orientation", ca.dot(phi, phi), -np.inf, np.pi**2)
+        verts = ca.mtimes(R, ca.DM(r.body_vertices_B.T)) + ca.repmat(pos, 1, 8)
+        clear = ca.vertcat(*[self.terrain.f_T_ca(verts[:, k]) for k in range(8)])
+        self.constrain("clearance", clear, o.clearance_m, np.inf)
+        self.constrain("sigma1", s1 - ca.dot(u_f, R[:, 0]))
+        self.constrain("sigma2", s2 - ca.dot(u_n, R[:, 2]))
+        com = com_W_ca(self, pos, R, th)
+        if self.fix_com:
+            self.constrain("com", com - rc)
+        if o.forces and not self.fix_com:
+            feet_cols = ca.reshape(feet, 3, 4)
+            normal_cols = ca.reshape(normals, 3, 4)
+            F = self._eq5_forces_ca(feet_cols, com)
+            ns = [normal_cols[:, i] for i in range(4)]
+            fmin = o.min_normal_force_frac * r.total_mass_kg * 9.81
+            cone = statics.friction_cone_residuals_ca(
+                F, self.mu, self.support, ns, eps_N=o.friction_eps_N
+            )
+            self.constrain("forces_normal", cone[0::2], fmin, np.inf)
+            self.constrain("forces_cone", cone[1::2], 0.0, np.inf)
+            s5 = self.var("s5", 1, o.sigma_floor, 1.0)
+            ratio = ca.vertcat(
+                *[
+                    ca.dot(F[i], ns[i]) / ca.sqrt(ca.dot(F[i], F[i]) + o.friction_eps_N**2)
+                    for i in self.support
+                ]
+            )
+            self.constrain("sigma5", ratio - s5, 0.0, np.inf)
+            self.maximise_log("sigma5", o.weights[4], s5)
+        d_theta = th - ca.DM(r.theta_nor.ravel())
+        self.maximise_log("sigma1", o.weights[0], s1)
+        self.maximise_log("sigma2", o.weights[1], s2)
+        self.maximise_log("sigma3", o.weights[2], sigma3_ca(d_theta, o))
+        if not self.fix_com:
+            self.maximise_log("sigma4", o.weights[3], gaussian_ca(com - rc, o.com_length_m))
+
+    def _eq5_forces_ca(self, feet_cols, com):
+        """Eq. 3-5 forces with the footholds fixed: linear in the COM.
+
+        With positions rho_i = r_i - c relative to the support centroid c, force balance
+        gives w = -m g / n, and moment balance S u = rho_c x (-m g) with the constant
+        S = sum_i (|rho_i|^2 I - rho_i rho_i^T) (non-singular unless the feet are
+        collinear). S^-1 is computed once per solve from the footholds and passed as a
+        parameter, so F_i = u x rho_i + w costs a few flops inside IPOPT. Equal to
+        :func:`planner.statics.equilibrating_forces` (tested).
+        """
+        weight = -self.robot.total_mass_kg * ca.DM(statics.GRAVITY_W)  # -m g
+        centroid = self.par("support_centroid", 3)
+        s_inv = ca.reshape(self.par("support_S_inv", 9), 3, 3)
+        w = weight / len(self.support)
+        u = ca.mtimes(s_inv, ca.cross(com - centroid, weight))
+        zero = ca.SX.zeros(3, 1)
+        return [
+            ca.cross(u, feet_cols[:, i] - centroid) + w if i in self.support else zero
+            for i in range(4)
+        ]
+
+    def support_geometry(self, feet_W: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Centroid and S^-1 of the support feet (see :meth:`_eq5_forces_ca`)."""
+        pts = np.asarray(feet_W, float)[list(self.support)]
+        centroid = pts.mean(axis=0)
+        rho = pts - centroid
+        S = sum(float(q @ q) * np.eye(3) - np.outer(q, q) for q in rho)
+        return centroid, np.linalg.inv(S)
+
+    # ---- solving -------------------------------------------------------------------------
+    def params(self, start: State, rc_star_W, u_f, u_n) -> np.ndarray:
+        """Parameter vector for footholds of ``start``, target r_c*, directions u_f, u_n."""
+        from planner.contact import foot_centre_from_contact
+
+        centres = foot_centre_from_contact(self.terrain, start.feet_W, self.robot.foot_radius_m)
+        values = {}
+        if "support_S_inv" in self._p_slices:
+            centroid, s_inv = self.support_geometry(start.feet_W)
+            values = {"support_centroid": centroid, "support_S_inv": s_inv.T.ravel()}
+        return self.pack_params(
+            values
+            | {
+                "rc_star": rc_star_W,
+                "feet_W": start.feet_W,
+                "centres_W": centres,
+                "normals_W": self.terrain.normal(start.feet_W),
+                "u_f": np.asarray(u_f, float) / np.linalg.norm(u_f),
+                "u_n": np.asarray(u_n, float) / np.linalg.norm(u_n),
+            }
+        )
+
+    def initial_guess(self, start: State, p: np.ndarray) -> np.ndarray:
+        """Decision vector at a state (the warm start on the leaf)."""
+        eps = coords_from_pose(start.pose)
+        R = start.base_rotation_W
+        u_f = p[self._p_slices["u_f"]]
+        u_n = p[self._p_slices["u_n"]]
+        floor = self.options.sigma_floor
+        x = [
+            eps[:3],
+            eps[3:],
+            start.joints_rad.ravel(),
+            [max(float(u_f @ R[:, 0]), floor)],
+            [max(float(u_n @ R[:, 2]), floor)],
+        ]
+        if "s5" in self._x_slices:
+            x.append([0.5])
+        return np.concatenate([np.asarray(v, float).ravel() for v in x])
+
+    def solve(self, start: State, rc_star_W, u_f, u_n) -> ThetaSolution:
+        """Theta2(r_c*, tau, r_1*..r_4*, i_f) of eq. 8, warm-started at ``start``."""
+        p = self.params(start, rc_star_W, u_f, u_n)
+        sol = self.solve_packed(p, self.initial_guess(start, p))
+        sol.state.info["rc_star"] = np.asarray(rc_star_W, float)
+        return sol
+
+    def _state_from_x(self, x: np.ndarray, p: np.ndarray) -> State:
+        eps = np.concatenate([self.x_block(x, "p"), self.x_block(x, "phi")])
+        feet = p[self._p_slices["feet_W"]].reshape(4, 3)
+        state = state_from_pose_coords(
+            eps, feet, self.x_block(x, "theta").reshape(4, 3), S0, self.support
+        )
+        return state
+
+    def _violations(self, state: State, x, p) -> dict[str, float]:
+        ck = self.check
+        v = {
+            "contact": ck.contacts(state, range(4)),
+            "joint_limits": ck.joint_limits(state),
+            "clearance": ck.clearance(state),
+            "orientation": ck.orientation(state),
+        }
+        if self.fix_com:
+            rc = p[self._p_slices["rc_star"]]
+            v["com"] = float(np.linalg.norm(ck.com_W(state) - rc))
+        if self.options.forces or self.fix_com:
+            viol, forces = ck.forces(state, self.support, self.mu)
+            state.forces_W = forces
+            if self.options.forces:
+                v["forces"] = max(viol, 0.0)
+        return v

@@ -1,0 +1,148 @@
+"""Theta1-Theta4 (sections 7.2-7.5) on named reference stances, checked independently."""
+
+import numpy as np
+import pytest
+
+from planner import statics
+from planner.problems import Theta1, Theta2, Theta3, Theta4, ThetaOptions
+from planner.problems.base import FEASIBILITY_TOL
+from planner.robot import load_robot
+from planner.terrain import load_terrain
+
+# (terrain, body x [m]): flat ground, a 10 degree slope, straddling a 5 cm step
+STANCES = [("flat", 0.3), ("slope10", 1.0), ("step5cm", None)]
+
+
+@pytest.fixture(scope="module")
+def dog():
+    return load_robot("littledog")
+
+
+def _step_x(terrain):
+    """x of the step edge: where the sharp height first exceeds half the rise."""
+    xs = np.linspace(0, 2.5, 2501)
+    h = terrain.height_sharp(xs, np.zeros_like(xs))
+    return float(xs[np.argmax(h > 0.5 * h.max())])
+
+
+def _directions(terrain, x):
+    p = np.array([x, 0.0, float(terrain.height(np.array(x), np.array(0.0)))])
+    n = terrain.smoothed_normal(p, 0.1)
+    u_f = np.array([1.0, 0.0, 0.0])
+    u_f = u_f - (u_f @ n) * n
+    return u_f / np.linalg.norm(u_f), n
+
+
+def _placed(dog, name, x):
+    terrain = load_terrain(name)
+    if x is None:  # body centred on the step edge: front feet up, hind feet down
+        x = _step_x(terrain)
+    u_f, u_n = _directions(terrain, x)
+    z = float(terrain.height(np.array(x), np.array(0.0))) + 0.15
+    sol = Theta4(dog, terrain).solve([x, 0.0, z], u_f, u_n)
+    return terrain, sol, u_f, u_n
+
+
+@pytest.mark.parametrize("name,x", STANCES)
+def test_theta4_places_the_robot(dog, name, x):
+    terrain, sol, _, _ = _placed(dog, name, x)
+    assert sol.feasible, sol.diagnosis
+    assert sol.max_violation() < FEASIBILITY_TOL
+    # independently: feet on the terrain, forces of eq. 5 balance and lie in the cones
+    assert np.abs(terrain.f_T(sol.state.feet_W)).max() < 1e-6
+    assert statics.forces_in_friction_cones(
+        sol.state.forces_W, terrain_mu(terrain), (0, 1, 2, 3), terrain.normal(sol.state.feet_W)
+    )
+
+
+def terrain_mu(terrain):
+    return float(terrain.spec.get("friction", 0.7))
+
+
+@pytest.mark.parametrize("name,x", STANCES)
+def test_theta2_moves_com_over_three_feet(dog, name, x):
+    terrain, placed, u_f, u_n = _placed(dog, name, x)
+    start = placed.state
+    support = (1, 2, 3)  # FL about to swing
+    problem = Theta2(dog, terrain, support=support)
+    rc = start.feet_W[list(support)].mean(axis=0) + 0.15 * u_n
+    sol = problem.solve(start, rc, u_f, u_n)
+    assert sol.feasible, sol.diagnosis
+    assert sol.max_violation() < FEASIBILITY_TOL
+    np.testing.assert_array_equal(sol.state.feet_W, start.feet_W)  # same leaf of S0
+    # forces of the S^-1 formulation equal the statics module's eq. 5
+    com = problem.check.com_W(sol.state)
+    ref = statics.equilibrating_forces(start.feet_W, com, dog.total_mass_kg, support)
+    np.testing.assert_allclose(sol.state.forces_W, ref.forces, atol=1e-9)
+    # objective no worse than the (feasible) start's
+    p = problem.params(start, rc, u_f, u_n)
+    x0 = problem.initial_guess(start, p)
+    assert sol.objective <= problem.objective_at(x0, p) + 1e-9
+    # the weighted log objective ranks like the paper's product
+    prod = np.prod(
+        [v**w for (k, v), w in zip(sol.objective_terms.items(), _weights(problem), strict=True)]
+    )
+    assert -np.log(prod) == pytest.approx(sol.objective, abs=1e-6)
+
+
+def _weights(problem):
+    return [w for _, w, _ in problem._terms]
+
+
+@pytest.mark.parametrize("name,x", STANCES)
+def test_theta1_hits_the_com_target(dog, name, x):
+    terrain, placed, u_f, u_n = _placed(dog, name, x)
+    start = placed.state
+    support = (0, 1, 2, 3)
+    problem = Theta1(dog, terrain, support=support)
+    com0 = problem.check.com_W(start)
+    rc = com0 + 0.01 * u_f  # 1 cm ahead on the trajectory
+    sol = problem.solve(start, rc, u_f, u_n)
+    assert sol.feasible, sol.diagnosis
+    assert np.linalg.norm(problem.check.com_W(sol.state) - rc) < 1e-6
+
+
+@pytest.mark.parametrize("name,x", STANCES)
+def test_theta3_places_a_foot(dog, name, x):
+    terrain, placed, u_f, u_n = _placed(dog, name, x)
+    start = placed.state
+    for leg in range(4):
+        problem = Theta3(dog, terrain, leg=leg)
+        target = start.feet_W[leg] + 0.04 * u_f
+        sol = problem.solve(start, target)
+        assert sol.feasible, sol.diagnosis
+        foot = sol.state.feet_W[leg]
+        assert abs(float(terrain.f_T(foot))) < 1e-6
+        # other legs untouched
+        others = [i for i in range(4) if i != leg]
+        np.testing.assert_array_equal(sol.state.feet_W[others], start.feet_W[others])
+        p = problem.pack_params(
+            {"p": start.base_position_W, "R": start.base_rotation_W.T.ravel(), "target_W": target}
+        )
+        assert sol.objective <= problem.objective_at(start.joints_rad[leg], p) + 1e-9
+
+
+def test_unreachable_foothold_is_reported(dog):
+    terrain, placed, u_f, u_n = _placed(dog, "flat", 0.3)
+    start = placed.state.copy()
+    start.feet_W[0] += [0.25, 0.0, 0.0]  # FL foothold 25 cm ahead: out of reach
+    sol = Theta2(dog, terrain, support=(1, 2, 3)).solve(
+        start, placed.state.base_position_W, u_f, u_n
+    )
+    assert not sol.feasible
+    assert "contact" in sol.diagnosis and "reach" in sol.diagnosis
+
+
+def test_com_outside_support_is_reported(dog):
+    terrain, placed, u_f, u_n = _placed(dog, "flat", 0.3)
+    start = placed.state
+    rc = start.base_position_W + [0.3, 0.0, 0.0]  # far ahead of the front feet
+    sol = Theta1(dog, terrain, support=(0, 1, 2, 3)).solve(start, rc, u_f, u_n)
+    assert not sol.feasible and sol.status == "Infeasible_Forces"
+    assert "cannot be held" in sol.diagnosis
+    # and the soft version cannot keep a 3-foot stance whose COM lies outside
+    opts = ThetaOptions(weights=(1, 1, 1, 2, 0.5))
+    sol2 = Theta2(dog, terrain, support=(1, 2, 3), options=opts).solve(start, rc, u_f, u_n)
+    assert sol2.feasible  # soft persuasion stays inside and only approaches rc
+    com = Theta2(dog, terrain, support=(1, 2, 3)).check.com_W(sol2.state)
+    assert np.linalg.norm(com - rc) > 0.1
