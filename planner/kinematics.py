@@ -217,7 +217,8 @@ class LegKinematics:
             return self._ik_numeric(leg, target, ref, want, tol_m)
         sols = self._ik_paden_kahan(leg, target, centre, tol_m)
         if not sols:
-            res = self._ik_numeric(leg, target, ref, want, tol_m, exact_only=False)
+            # no exact solution: only the closest in-limit angles are wanted (few starts)
+            res = self._ik_numeric(leg, target, ref, want, tol_m, n_starts=4)
             res.method = "paden-kahan"
             res.reason = res.reason or "no exact in-limit solution"
             return res
@@ -265,7 +266,7 @@ class LegKinematics:
         return uniq
 
     def _ik_numeric(
-        self, leg: int, target, ref, want: int, tol_m: float, exact_only: bool = True
+        self, leg: int, target, ref, want: int, tol_m: float, n_starts: int = 24
     ) -> IKResult:
         """Bounded least squares from several starts (legs whose hip axes do not meet)."""
         lg = self.legs[leg]
@@ -274,7 +275,7 @@ class LegKinematics:
         hi_f = np.where(np.isfinite(hi), hi, np.pi)
         starts = [np.clip(ref, lo_f, hi_f)]
         rng = np.random.default_rng(leg)
-        starts += [lo_f + (hi_f - lo_f) * rng.random(3) for _ in range(23)]
+        starts += [lo_f + (hi_f - lo_f) * rng.random(3) for _ in range(n_starts - 1)]
 
         def resid(th):
             return self.foot_B(leg, th) - target

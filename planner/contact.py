@@ -1,0 +1,147 @@
+"""Foot contact points and foot sphere centres (paper sections 4.3 and 4.5).
+
+A foot is a sphere of radius rho (``robot.foot_radius_m``). Kinematics (eq. 1-2) places
+the sphere *centre*; a plan stores the *contact point* r_i on the terrain (section 4.3,
+DESIGN.md section 3). The two differ by rho along the pseudo-normal n = grad f_T / |grad f_T|
+(section 4.5):
+
+    centre = r + rho n(r).
+
+Both maps are exact for a locally planar terrain (the sphere touches the plane at the foot
+of the perpendicular from its centre). On a curved terrain the true touching point moves by
+O(rho^2 kappa) (kappa the surface curvature) from what these maps give; with LittleDog's
+rho = 10.3 mm and curvatures below ~10 1/m that is about a millimetre at worst.
+
+Swing-foot convention (used by :mod:`planner.interpolate` and ``State.feet_W``): a foot in
+the air is stored as the point one radius *below* its sphere centre, ``centre - rho e_z``
+(the sphere's lowest point), see :func:`swing_centre_from_point`.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = [
+    "TerrainLike",
+    "foot_centre_from_contact",
+    "contact_from_foot_centre",
+    "swing_centre_from_point",
+    "swing_point_from_centre",
+    "foot_centres_W",
+]
+
+_Array = NDArray[np.float64]
+E_Z = np.array([0.0, 0.0, 1.0])
+
+
+class TerrainLike(Protocol):
+    """The part of ``planner.terrain.Terrain`` used here (section 4.4-4.5)."""
+
+    def height(self, x: ArrayLike, y: ArrayLike) -> _Array:
+        """Terrain height z_T(x, y) [m]."""
+
+    def normal(self, p_W: ArrayLike) -> _Array:
+        """Unit pseudo-normals grad f_T / |grad f_T| at points (..., 3)."""
+
+
+def _points(p: ArrayLike, what: str) -> _Array:
+    arr = np.asarray(p, dtype=float)
+    if arr.shape[-1:] != (3,):
+        raise ValueError(f"{what}: expected points of shape (..., 3), got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{what}: points must be finite, got {p!r}")
+    return arr
+
+
+def foot_centre_from_contact(terrain: TerrainLike, contact_W: ArrayLike, radius_m: float) -> _Array:
+    """Sphere centre ``r + rho n(r)`` of a foot touching the terrain at ``contact_W``.
+
+    Parameters
+    ----------
+    terrain : Terrain
+        Provides ``normal(p_W)``, the unit pseudo-normal (section 4.5).
+    contact_W : array_like, shape (..., 3)
+        Contact points r_i on the terrain [m], world frame.
+    radius_m : float
+        Foot sphere radius rho [m].
+
+    Returns
+    -------
+    ndarray, shape (..., 3)
+        Sphere centres [m], world frame. Exact for a locally planar terrain.
+
+    """
+    r = _points(contact_W, "foot_centre_from_contact")
+    return r + float(radius_m) * np.asarray(terrain.normal(r), dtype=float)
+
+
+def contact_from_foot_centre(terrain: TerrainLike, centre_W: ArrayLike, radius_m: float) -> _Array:
+    """Contact point ``c - rho n`` of a foot sphere centred at ``centre_W``.
+
+    The normal is evaluated at the terrain point under the centre,
+    ``(c_x, c_y, height(c_x, c_y))``. Exact for a locally planar terrain whose slope is
+    small enough that the normal does not vary between that point and the touching point;
+    off by O(rho^2 curvature) otherwise.
+
+    Parameters
+    ----------
+    terrain : Terrain
+        Provides ``height(x, y)`` and ``normal(p_W)``.
+    centre_W : array_like, shape (..., 3)
+        Foot sphere centres [m], world frame.
+    radius_m : float
+        Foot sphere radius rho [m].
+
+    Returns
+    -------
+    ndarray, shape (..., 3)
+        Contact points [m], world frame.
+
+    """
+    c = _points(centre_W, "contact_from_foot_centre")
+    below = c.copy()
+    below[..., 2] = np.asarray(terrain.height(c[..., 0], c[..., 1]), dtype=float)
+    return c - float(radius_m) * np.asarray(terrain.normal(below), dtype=float)
+
+
+def swing_centre_from_point(point_W: ArrayLike, radius_m: float) -> _Array:
+    """Sphere centre of a swing foot stored as the point one radius below it: ``p + rho e_z``."""
+    return _points(point_W, "swing_centre_from_point") + float(radius_m) * E_Z
+
+
+def swing_point_from_centre(centre_W: ArrayLike, radius_m: float) -> _Array:
+    """Stored point of a swing foot (its sphere's lowest point): ``c - rho e_z``."""
+    return _points(centre_W, "swing_point_from_centre") - float(radius_m) * E_Z
+
+
+def foot_centres_W(
+    terrain: TerrainLike, feet_W: ArrayLike, in_contact: ArrayLike, radius_m: float
+) -> _Array:
+    """Sphere centres of four feet: contact feet by the normal, swing feet by ``+rho e_z``.
+
+    Parameters
+    ----------
+    terrain : Terrain
+        The terrain the contact feet stand on.
+    feet_W : array_like, shape (4, 3)
+        Stored foot points (``State.feet_W``) [m], world frame.
+    in_contact : array_like, shape (4,)
+        Booleans, True for a foot on the terrain (``State.in_contact``).
+    radius_m : float
+        Foot sphere radius rho [m].
+
+    Returns
+    -------
+    ndarray, shape (4, 3)
+        Sphere centres [m], world frame, what the leg kinematics (eq. 2) must reach.
+
+    """
+    feet = _points(feet_W, "foot_centres_W").reshape(4, 3)
+    mask = np.asarray(in_contact, dtype=bool).reshape(4)
+    out = swing_centre_from_point(feet, radius_m)
+    if mask.any():
+        out[mask] = foot_centre_from_contact(terrain, feet[mask], radius_m)
+    return out

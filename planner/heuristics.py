@@ -1,0 +1,281 @@
+"""Target heuristics Lambda_c and Lambda_t (paper sections 8.2.1-8.2.2, eq. 12-13).
+
+- :func:`lambda_c` gives r_c*, the body target of the soft-persuasion problem Theta_2
+  (section 7.3) before leg i_f swings: the support triangle's centroid lifted above the
+  terrain (eq. 12).
+- :func:`lambda_t` gives r_{i_f}^t, the foothold target of the foot-placement problem
+  Theta_3 (section 7.4): the leg's normal position (joints at theta_nor) with the body on
+  the trajectory, moved a stride ahead along it (eq. 13).
+- :func:`reference_directions` and :func:`body_pose_on_trajectory` give the reference
+  forward and normal directions u_f, u_n of the objectives sigma_1, sigma_2 (section 7.2-7.3)
+  and the body pose they describe.
+
+Legs are 0-based here (FL=0 .. HR=3); the paper's leg i_f is ``i_f + 1``.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Protocol
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from planner.kinematics import kinematics_of
+
+if TYPE_CHECKING:
+    from planner.robot import Robot
+    from planner.state import State
+    from planner.trajectory import Trajectory
+
+__all__ = [
+    "nominal_height_m",
+    "default_step_m",
+    "normal_smoothing_radius_m",
+    "support_centroid_W",
+    "support_incentre_W",
+    "lambda_c",
+    "lambda_t",
+    "reference_directions",
+    "body_pose_on_trajectory",
+    "normal_foot_centre_W",
+]
+
+_Array = NDArray[np.float64]
+STEP_FRACTION_OF_REACH = 0.35  # default stride = 0.35 * leg reach (0.063 m for LittleDog)
+DEFAULT_NORMAL_RADIUS_M = 0.1  # [m] smoothing radius of u_n when no robot is given
+
+
+class _Terrain(Protocol):
+    def height(self, x: ArrayLike, y: ArrayLike) -> _Array: ...
+
+    def smoothed_normal(self, p_W: ArrayLike, radius: float) -> _Array: ...
+
+
+# ---- robot-derived defaults ---------------------------------------------------------------
+def nominal_height_m(robot: Robot) -> float:
+    """Body origin height above flat ground with every leg at theta_nor [m].
+
+    ``-min_i z_B(foot centre_i at theta_nor) + rho``: the body level, the lowest foot sphere
+    touching the ground. 0.152 m for LittleDog. The default d_c of :func:`lambda_c`.
+    """
+    feet_B = kinematics_of(robot).feet_B(robot.theta_nor)
+    return float(-feet_B[:, 2].min() + robot.foot_radius_m)
+
+
+def default_step_m(robot: Robot) -> float:
+    """Default stride of :func:`lambda_t`: ``0.35 * mean leg reach`` [m] (0.063 m, LittleDog)."""
+    return float(STEP_FRACTION_OF_REACH * np.mean(robot.reach_m))
+
+
+def normal_smoothing_radius_m(robot: Robot) -> float:
+    """Smoothing radius of the pseudo-normal u_n [m]: the largest hip distance in xy.
+
+    About half the body length (0.107 m for LittleDog).
+    """
+    hips = np.array([leg.points_B[0][:2] for leg in robot.legs])
+    return float(np.linalg.norm(hips, axis=1).max())
+
+
+# ---- Lambda_c, eq. 12 ---------------------------------------------------------------------
+def _check_leg(i_f: int) -> int:
+    if int(i_f) not in range(4) or int(i_f) != i_f:
+        raise ValueError(f"swing leg i_f must be 0..3 (FL, FR, HL, HR), got {i_f!r}")
+    return int(i_f)
+
+
+def _support(state: State, i_f: int) -> _Array:
+    others = [i for i in range(4) if i != _check_leg(i_f)]
+    return np.asarray(state.feet_W, dtype=float)[others]
+
+
+def support_centroid_W(state: State, i_f: int) -> _Array:
+    """Mean of the three contact points other than leg ``i_f``'s (r_c^+ of eq. 12) [m].
+
+    The paper writes r_c^+ = sum_{i != i_f} r_i; a sum of positions is not a position, the
+    mean (the support triangle's centroid) is what is meant.
+    """
+    return _support(state, i_f).mean(axis=0)
+
+
+def support_incentre_W(state: State, i_f: int) -> _Array:
+    """Incentre of the support triangle of the legs other than ``i_f``, in xy (z: mean).
+
+    The incentre is the point of the (horizontally projected) triangle farthest from its
+    nearest edge: the largest static stability margin for a COM over it. A degenerate
+    (collinear) triangle gives its centroid.
+    """
+    tri = _support(state, i_f)
+    xy = tri[:, :2]
+    # side lengths opposite each vertex
+    a = np.linalg.norm(xy[[1, 2, 0]] - xy[[2, 0, 1]], axis=1)
+    if a.sum() <= 1e-12:
+        return tri.mean(axis=0)
+    out = tri.mean(axis=0)
+    out[:2] = (a[:, None] * xy).sum(axis=0) / a.sum()
+    return out
+
+
+def lambda_c(
+    robot: Robot,
+    terrain: _Terrain,
+    state: State,
+    i_f: int,
+    d_c_m: float | None = None,
+    shrink: float = 0.0,
+) -> _Array:
+    """Body target r_c* = Lambda_c(Psi, i_f) (section 8.2.1, eq. 12).
+
+    Step 1: r_c^+ = the centroid of the three contact points r_i, i != i_f (the paper's sum
+    means their mean). A COM at the centroid has only a third of each altitude as margin
+    to the support triangle's edges, and moving onto three legs shrinks that margin further
+    under modelling errors (section 8.2.1's argument); ``shrink`` in [0, 1] moves r_c^+ that
+    fraction of the way from the centroid toward the triangle's incentre (the point with
+    the largest distance to the nearest edge, :func:`support_incentre_W`). 0 is the paper.
+    Step 2: lift to ``d_c_m`` above the terrain, r_c* = (x, y, height(x, y) + d_c).
+
+    Parameters
+    ----------
+    robot : Robot
+        Gives the default ``d_c_m`` (:func:`nominal_height_m`).
+    terrain : Terrain
+        Provides ``height(x, y)`` (the "simple terrain" z = z_T(x, y) of the paper).
+    state : State
+        Psi; its ``feet_W`` are the contact points.
+    i_f : int
+        Leg about to swing, 0-based.
+    d_c_m : float, optional
+        Height above the terrain [m]; default the nominal standing height.
+    shrink : float
+        Fraction of the way from the centroid to the incentre, in [0, 1].
+
+    Returns
+    -------
+    ndarray, shape (3,)
+        r_c* [m], world frame.
+
+    """
+    if not 0.0 <= shrink <= 1.0:
+        raise ValueError(f"lambda_c: shrink must lie in [0, 1], got {shrink!r}")
+    d_c = nominal_height_m(robot) if d_c_m is None else float(d_c_m)
+    r = support_centroid_W(state, i_f)
+    if shrink > 0.0:
+        r = (1.0 - shrink) * r + shrink * support_incentre_W(state, i_f)
+    z = float(np.asarray(terrain.height(r[0], r[1]), dtype=float))
+    return np.array([r[0], r[1], z + d_c])
+
+
+# ---- reference directions and the body pose on tau (sections 7.2-7.3) -----------------------
+def reference_directions(
+    tau: Trajectory,
+    terrain: _Terrain,
+    point_W: ArrayLike,
+    radius_m: float = DEFAULT_NORMAL_RADIUS_M,
+    lam: float | None = None,
+) -> tuple[_Array, _Array]:
+    """Reference forward and normal directions (u_f, u_n) of sigma_1, sigma_2 (section 7.2).
+
+    u_f = dR_tau/dlambda at the lambda closest to ``point_W`` (xy projection, section 7.3's
+    lambda_{r_c*}) or at ``lam`` when given; u_n = the smoothed pseudo-normal
+    ``terrain.smoothed_normal(point_W, radius_m)``. Both unit vectors, world frame.
+    """
+    p = np.asarray(point_W, dtype=float).reshape(3)
+    lam_ = tau.closest_lambda(p) if lam is None else float(lam)
+    u_f = np.asarray(tau.tangent(lam_), dtype=float).reshape(3)
+    u_n = np.asarray(terrain.smoothed_normal(p, radius_m), dtype=float).reshape(3)
+    return u_f, u_n / np.linalg.norm(u_n)
+
+
+def _frame_from_directions(u_f: _Array, u_n: _Array) -> _Array:
+    """Rotation with z_B = u_n and x_B = u_f projected on the plane normal to u_n."""
+    z = u_n / np.linalg.norm(u_n)
+    x = u_f - np.dot(u_f, z) * z
+    if np.linalg.norm(x) < 1e-9:  # u_f along the normal: fall back to the world x axis
+        x = np.array([1.0, 0.0, 0.0]) - z[0] * z
+        if np.linalg.norm(x) < 1e-9:
+            x = np.array([0.0, 1.0, 0.0]) - z[1] * z
+    x /= np.linalg.norm(x)
+    return np.column_stack([x, np.cross(z, x), z])
+
+
+def body_pose_on_trajectory(
+    robot: Robot,
+    terrain: _Terrain,
+    tau: Trajectory,
+    lam: float,
+    radius_m: float | None = None,
+) -> tuple[_Array, _Array]:
+    """Body pose g on tau at lambda: position R_tau(lambda), oriented by (u_f, u_n).
+
+    The body z axis is the smoothed terrain normal u_n at R_tau(lambda) (roll and pitch
+    parallel to the terrain), its x axis the tangent u_f projected onto the plane normal to
+    u_n (yaw along the path): the orientation that maximises sigma_1 and sigma_2 of
+    section 7.2 together.
+
+    Returns
+    -------
+    p_W : ndarray, shape (3,)
+        Body origin [m], world frame.
+    R_WB : ndarray, shape (3, 3)
+        Rotation body -> world.
+
+    """
+    rad = normal_smoothing_radius_m(robot) if radius_m is None else float(radius_m)
+    p = np.asarray(tau.point(lam), dtype=float).reshape(3)
+    u_f, u_n = reference_directions(tau, terrain, p, rad, lam=lam)
+    return p, _frame_from_directions(u_f, u_n)
+
+
+# ---- Lambda_t, eq. 13 ---------------------------------------------------------------------
+def normal_foot_centre_W(robot: Robot, p_W: ArrayLike, R_WB: ArrayLike, leg: int) -> _Array:
+    """Sphere centre of ``leg`` at theta_nor for the body pose (p_W, R_WB): g * FK(theta_nor)."""
+    leg = _check_leg(leg)
+    foot_B = kinematics_of(robot).foot_B(leg, robot.theta_nor[leg])
+    return np.asarray(R_WB, float) @ foot_B + np.asarray(p_W, float).reshape(3)
+
+
+def lambda_t(
+    robot: Robot,
+    terrain: _Terrain,
+    state: State,
+    i_f: int,
+    tau: Trajectory,
+    step_m: float | None = None,
+    radius_m: float | None = None,
+) -> _Array:
+    """Foothold target r_{i_f}^t = Lambda_t(Psi, i_f, tau) (section 8.2.2, eq. 13).
+
+    1. lambda* = the lambda of tau closest (in xy) to the body position Psi.g.v.
+    2. The *normal position* of foot i_f: its sphere centre at theta_nor with the body at
+       the pose of :func:`body_pose_on_trajectory`, projected vertically onto the terrain.
+    3. Moved ``step_m`` ahead along tau: the body pose is taken at lambda* + step_m instead
+       of lambda*, so the foot is carried along the path (on a straight path that is the
+       normal position plus step_m times the tangent). Past the end of tau the body stops
+       at R_tau(L).
+
+    Parameters
+    ----------
+    robot, terrain : Robot, Terrain
+        The robot (theta_nor, kinematics) and the terrain (``height``, ``smoothed_normal``).
+    state : State
+        Psi; only its base position is used.
+    i_f : int
+        Leg to place, 0-based.
+    tau : Trajectory
+        The trajectory, lambda its arc length.
+    step_m : float, optional
+        Stride [m]; default :func:`default_step_m`.
+    radius_m : float, optional
+        Smoothing radius of the terrain normal; default :func:`normal_smoothing_radius_m`.
+
+    Returns
+    -------
+    ndarray, shape (3,)
+        Contact point on the terrain, (x, y, height(x, y)) [m], world frame.
+
+    """
+    i_f = _check_leg(i_f)
+    step = default_step_m(robot) if step_m is None else float(step_m)
+    lam_star = float(tau.closest_lambda(np.asarray(state.base_position_W, float)))
+    p, R = body_pose_on_trajectory(robot, terrain, tau, float(tau.clip(lam_star + step)), radius_m)
+    c = normal_foot_centre_W(robot, p, R, i_f)
+    return np.array([c[0], c[1], float(np.asarray(terrain.height(c[0], c[1]), dtype=float))])

@@ -1,0 +1,433 @@
+"""Interpolation along a leaf of a stratum (paper section 7.1, eq. 6a/6b) and swing paths.
+
+On a leaf the stance feet's contact points r_j are fixed; the base pose g moves linearly in
+compact exponential coordinates (section 4.7),
+
+    g(nu) = g~((1 - nu) eps~(g_1) + nu eps~(g_2)),   nu in [0, 1],
+
+and the joints at each sample come from inverse kinematics (section 5.1.2) of the stance
+feet's sphere centres r_j + rho n(r_j) (:mod:`planner.contact`).
+
+On S_i, i != 0, eq. 6a moves the swing foot linearly from r_i^1 to r_i^2, which drags it
+through the ground whenever the terrain between them rises. Beyond the paper,
+:func:`swing_path` lifts the foot along the terrain normal, rises vertically to a travel
+height ``clearance_m`` above the highest terrain under its track, travels there, descends
+vertically and comes down onto the new foothold along its normal.
+
+Swing-foot convention: a foot in the air is stored (``State.feet_W``, the ``points_W`` of a
+:class:`SwingPath`) as the point one radius *below* its sphere centre, ``centre - rho e_z``
+(the sphere's lowest point). A foot on the terrain is stored as its contact point, centre
+``r + rho n(r)``. A swing path is planned in sphere-centre space, so the centres (what the
+leg reaches) are continuous from lift-off to touch-down; the stored point at the two ends
+is the contact point.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Protocol
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from planner.contact import E_Z, foot_centre_from_contact
+from planner.kinematics import kinematics_of
+from planner.lie import interpolate_coords, pose_from_coords
+from planner.state import State
+
+if TYPE_CHECKING:
+    from planner.robot import Robot
+
+__all__ = [
+    "SwingPath",
+    "swing_path",
+    "swing_foot_path",
+    "default_clearance_m",
+    "interpolate_leaf",
+    "interpolate_swing",
+]
+
+_Array = NDArray[np.float64]
+DEFAULT_CLEARANCE_M = 0.03  # [m] swing clearance when no robot is given (LittleDog)
+CLEARANCE_FRACTION_OF_REACH = 0.167  # default clearance = 0.167 * leg reach (0.030 m, LittleDog)
+ON_TERRAIN_TOL_M = 1e-6  # a foot point within this of height(x, y) is on the terrain
+STANCE_TOL_M = 1e-9  # stance feet of the two ends of a leaf must agree to this
+PHASES = ("liftoff", "rise", "travel", "descend", "touchdown")
+
+
+class _Terrain(Protocol):
+    def height(self, x: ArrayLike, y: ArrayLike) -> _Array: ...
+
+    def height_sharp(self, x: ArrayLike, y: ArrayLike) -> _Array: ...
+
+    def normal(self, p_W: ArrayLike) -> _Array: ...
+
+
+def default_clearance_m(robot: Robot) -> float:
+    """Default swing clearance: ``0.167 * mean leg reach`` [m] (0.030 m for LittleDog)."""
+    return float(CLEARANCE_FRACTION_OF_REACH * np.mean(robot.reach_m))
+
+
+def _smootherstep(u: _Array) -> _Array:
+    """6u^5 - 15u^4 + 10u^3: 0 -> 1 with zero velocity and acceleration at both ends."""
+    u = np.clip(u, 0.0, 1.0)
+    return u * u * u * (u * (6.0 * u - 15.0) + 10.0)
+
+
+# ---- swing path -----------------------------------------------------------------------------
+@dataclass
+class SwingPath:
+    """A swing-foot path sampled at n values of s in [0, 1].
+
+    Attributes
+    ----------
+    s : (n,) path parameter, uniform in [0, 1].
+    points_W : (n, 3) stored foot points [m]: the contact points at both ends, the point one
+        radius below the sphere centre in between.
+    centres_W : (n, 3) sphere centres [m], continuous along the path.
+    phase : (n,) index into :data:`PHASES` (0 liftoff, 1 rise, 2 travel, 3 descend,
+        4 touchdown) of each sample.
+    travel_z_m : height of the stored point during the travel phase [m].
+    corners_W : (6, 3) sphere-centre corners: lift centre, end of liftoff, top of rise, end
+        of travel, start of touchdown, touch centre.
+
+    """
+
+    s: _Array
+    points_W: _Array
+    centres_W: _Array
+    phase: _Array
+    travel_z_m: float
+    corners_W: _Array
+
+
+def _on_terrain(terrain: _Terrain, p: _Array) -> bool:
+    return abs(p[2] - float(np.asarray(terrain.height(p[0], p[1])))) <= ON_TERRAIN_TOL_M
+
+
+def _track_max_height(
+    terrain: _Terrain, segments: list[tuple[_Array, _Array]], step_m: float, margin_m: float
+) -> float:
+    """Max terrain height (sharp and smooth) over xy segments dilated by ``margin_m``."""
+    pts = []
+    for a, b in segments:
+        m = max(2, int(np.ceil(np.linalg.norm(b - a) / step_m)) + 1)
+        pts.append(a + np.linspace(0.0, 1.0, m)[:, None] * (b - a))
+    xy = np.concatenate(pts)
+    if margin_m > 0:
+        ang = np.linspace(0.0, 2.0 * np.pi, 12, endpoint=False)
+        dirs = np.column_stack([np.cos(ang), np.sin(ang)])
+        ring = np.concatenate([np.zeros((1, 2)), 0.5 * margin_m * dirs, margin_m * dirs])
+        xy = (xy[:, None, :] + ring[None, :, :]).reshape(-1, 2)
+    h = np.asarray(terrain.height(xy[:, 0], xy[:, 1]), dtype=float)
+    sharp = getattr(terrain, "height_sharp", None)
+    if sharp is not None:
+        h = np.maximum(h, np.asarray(sharp(xy[:, 0], xy[:, 1]), dtype=float))
+    return float(h.max())
+
+
+def swing_path(
+    terrain: _Terrain,
+    lift_W: ArrayLike,
+    touch_W: ArrayLike,
+    clearance_m: float = DEFAULT_CLEARANCE_M,
+    n: int = 21,
+    radius_m: float = 0.0,
+    liftoff_m: float | None = None,
+    track_step_m: float = 0.002,
+) -> SwingPath:
+    """Plan a swing foot's path from ``lift_W`` to ``touch_W`` (beyond eq. 6a).
+
+    In sphere-centre space (centre = contact + rho n at a foot on the terrain, stored point
+    + rho e_z in the air) the path joins six corners by straight pieces: liftoff along the
+    lift point's normal by ``liftoff_m``; vertical rise to the travel height; straight xy
+    travel at that height; vertical descent; touchdown along the touch point's normal. The
+    travel height puts the stored point (the sphere's lowest point) ``clearance_m`` above
+    the highest terrain (max of ``height_sharp`` and ``height``) under the xy track of the
+    straight segment lift -> touch and of the travel piece, sampled every ``track_step_m``
+    and widened by the foot radius; it is raised to the liftoff corners if those are higher.
+    Each piece is traversed with a smootherstep in s, its share of s proportional to its
+    length, so the path is C2 in s and stops at each corner (quasi-static; corners are not
+    cut, so a foot next to a step face does not hit it).
+
+    An end point more than 1e-6 m above ``height(x, y)`` is taken as already in the air
+    (stored point convention): it has no liftoff/touchdown piece.
+
+    Parameters
+    ----------
+    terrain : Terrain
+        Provides ``height``, ``height_sharp`` and ``normal``.
+    lift_W, touch_W : array_like, shape (3,)
+        Lift-off and touch-down contact points [m], world frame.
+    clearance_m : float
+        Travel clearance above the terrain [m].
+    n : int
+        Number of samples (>= 2), both ends included.
+    radius_m : float
+        Foot sphere radius rho [m] (0: the path of a point foot).
+    liftoff_m : float, optional
+        Distance travelled along the normals at both ends [m]; default ``clearance_m / 2``.
+    track_step_m : float
+        Sampling step of the terrain under the track [m].
+
+    Returns
+    -------
+    SwingPath
+        Points, centres and phases of the n samples.
+
+    """
+    if int(n) != n or n < 2:
+        raise ValueError(f"swing_path: n must be an integer >= 2, got {n!r}")
+    if not (clearance_m >= 0 and radius_m >= 0 and track_step_m > 0):
+        raise ValueError("swing_path: need clearance_m >= 0, radius_m >= 0, track_step_m > 0")
+    rho = float(radius_m)
+    h_off = 0.5 * float(clearance_m) if liftoff_m is None else float(liftoff_m)
+    ends = []
+    for p in (lift_W, touch_W):
+        p = np.asarray(p, dtype=float).reshape(3)
+        if not np.all(np.isfinite(p)):
+            raise ValueError(f"swing_path: end points must be finite, got {p!r}")
+        if _on_terrain(terrain, p):
+            nrm = np.asarray(terrain.normal(p), dtype=float).reshape(3)
+            c = foot_centre_from_contact(terrain, p, rho)
+            ends.append((p, c, c + h_off * nrm))
+        else:
+            c = p + rho * E_Z
+            ends.append((p, c, c))
+    (p0, c0, a1), (p1, c1, a4) = ends
+    top = _track_max_height(
+        terrain, [(p0[:2], p1[:2]), (a1[:2], a4[:2])], track_step_m, rho + track_step_m
+    )
+    travel_z = max(top + float(clearance_m), a1[2] - rho, a4[2] - rho)
+    a2 = np.array([a1[0], a1[1], travel_z + rho])
+    a3 = np.array([a4[0], a4[1], travel_z + rho])
+    corners = np.array([c0, a1, a2, a3, a4, c1])
+    lengths = np.linalg.norm(np.diff(corners, axis=0), axis=1)
+    total = lengths.sum()
+    if total <= 0.0:
+        frac = np.array([0.0, 0.0, 0.0, 1.0, 1.0, 1.0])  # no motion: all "travel"
+    else:
+        frac = np.concatenate([[0.0], np.cumsum(lengths) / total])
+    s = np.linspace(0.0, 1.0, int(n))
+    phase = np.clip(np.searchsorted(frac, s, side="right") - 1, 0, 4)
+    width = np.maximum(frac[phase + 1] - frac[phase], 1e-300)
+    u = np.where(frac[phase + 1] > frac[phase], (s - frac[phase]) / width, 1.0)
+    centres = corners[phase] + _smootherstep(u)[:, None] * (corners[phase + 1] - corners[phase])
+    centres[0], centres[-1] = c0, c1
+    points = centres - rho * E_Z
+    points[0], points[-1] = p0, p1
+    return SwingPath(s, points, centres, phase, float(travel_z), corners)
+
+
+def swing_foot_path(
+    terrain: _Terrain,
+    lift_W: ArrayLike,
+    touch_W: ArrayLike,
+    clearance_m: float = DEFAULT_CLEARANCE_M,
+    n: int = 21,
+    radius_m: float = 0.0,
+    liftoff_m: float | None = None,
+) -> _Array:
+    """Stored points (n, 3) [m] of :func:`swing_path`.
+
+    Contact points at the two ends, the point one radius below the sphere centre in between.
+    """
+    return swing_path(terrain, lift_W, touch_W, clearance_m, n, radius_m, liftoff_m).points_W
+
+
+# ---- interpolation along a leaf ---------------------------------------------------------------
+def _check_stance(state_a: State, state_b: State, stance: list[int]) -> None:
+    from planner.robot import LEG_NAMES
+
+    for i in stance:
+        d = float(np.linalg.norm(state_a.feet_W[i] - state_b.feet_W[i]))
+        if d > STANCE_TOL_M:
+            raise ValueError(
+                f"interpolate: stance foot {LEG_NAMES[i]} (leg {i + 1}) differs by {d:.3g} m "
+                "between the two states; they are not on the same leaf"
+            )
+
+
+def _leaf_stratum(state_a: State, state_b: State) -> int:
+    sa, sb = int(state_a.stratum), int(state_b.stratum)
+    if sa == sb or sb == 0:
+        return sa
+    if sa == 0:
+        return sb
+    raise ValueError(f"interpolate: states on different strata S{sa} and S{sb}, no common leaf")
+
+
+def _interpolate(
+    robot: Robot,
+    terrain: _Terrain,
+    state_a: State,
+    state_b: State,
+    n: int,
+    stratum: int,
+    swing: str,
+    clearance_m: float | None,
+    liftoff_m: float | None,
+) -> list[State]:
+    if int(n) != n or n < 2:
+        raise ValueError(f"interpolate: n must be an integer >= 2, got {n!r}")
+    n = int(n)
+    if swing not in ("path", "linear"):
+        raise ValueError(f"interpolate: swing must be 'path' or 'linear', got {swing!r}")
+    rho = robot.foot_radius_m
+    i_sw = stratum - 1 if stratum else None
+    stance = [i for i in range(4) if i != i_sw]
+    _check_stance(state_a, state_b, stance)
+
+    nus = np.linspace(0.0, 1.0, n)
+    eps = interpolate_coords(state_a.coords, state_b.coords, nus)
+    poses = [pose_from_coords(e) for e in eps]
+    poses[0], poses[-1] = state_a.pose, state_b.pose
+
+    feet = np.repeat(state_a.feet_W[None], n, axis=0)
+    centres = np.repeat(foot_centre_from_contact(terrain, state_a.feet_W, rho)[None], n, axis=0)
+    if i_sw is not None:
+        clr = default_clearance_m(robot) if clearance_m is None else float(clearance_m)
+        a, b = state_a.feet_W[i_sw], state_b.feet_W[i_sw]
+        if swing == "path":
+            sp = swing_path(terrain, a, b, clr, n, rho, liftoff_m)
+            feet[:, i_sw], centres[:, i_sw] = sp.points_W, sp.centres_W
+        else:  # eq. 6a, linear in sphere centres
+            ca, cb = (
+                foot_centre_from_contact(terrain, p, rho)
+                if _on_terrain(terrain, p)
+                else p + rho * E_Z
+                for p in (a, b)
+            )
+            centres[:, i_sw] = (1.0 - nus)[:, None] * ca + nus[:, None] * cb
+            feet[:, i_sw] = centres[:, i_sw] - rho * E_Z
+            feet[0, i_sw], feet[-1, i_sw] = a, b
+
+    kin = kinematics_of(robot)
+    ref = state_a.joints_rad
+    out: list[State] = []
+    for k in range(n):
+        p, R = poses[k][:3, 3], poses[k][:3, :3]
+        results = kin.ik(p, R, centres[k], reference_rad=ref)
+        joints = np.array([r.joints_rad for r in results])
+        bad = [i for i, r in enumerate(results) if not r.reachable]
+        end = state_a if k == 0 else state_b if k == n - 1 else None
+        info = {} if end is None else dict(end.info)
+        info.update(
+            nu=float(nus[k]),
+            ik_ok=not bad,
+            ik_error_m=float(max(r.error_m for r in results)),
+            unreachable_legs=bad,
+        )
+        out.append(
+            State(
+                base_position_W=p.copy(),
+                base_rotation_W=R.copy(),
+                feet_W=feet[k].copy(),
+                joints_rad=joints,
+                stratum=stratum if end is None else end.stratum,
+                support=(tuple(stance) if i_sw is not None else state_a.support)
+                if end is None
+                else end.support,
+                forces_W=None
+                if end is None or end.forces_W is None
+                else np.array(end.forces_W, dtype=float),
+                info=info,
+            )
+        )
+        ref = joints
+    return out
+
+
+def interpolate_leaf(
+    robot: Robot,
+    terrain: _Terrain,
+    state_a: State,
+    state_b: State,
+    n: int,
+    swing: str = "path",
+    clearance_m: float | None = None,
+    liftoff_m: float | None = None,
+) -> list[State]:
+    """Sample the leaf between two states at n values of nu in [0, 1] (section 7.1).
+
+    The leaf's stratum is the states' common stratum; a state on S0 may pair with one on
+    S_i (S0 ∩ S_i bounds S_i's leaves), the leaf is then S_i's. The base pose follows eq.
+    6a/6b (linear in compact exponential coordinates, ends exact). Stance feet must agree
+    between the states (ValueError naming the leg otherwise) and stay put. On S_i the swing
+    foot follows :func:`swing_path` (``swing="path"``) or, as eq. 6a, moves linearly in
+    sphere-centre space (``swing="linear"``, which may cut through the terrain).
+
+    Joints come from leg IK of the sphere centres at every sample, each seeded by the
+    previous sample's joints (the first by ``state_a.joints_rad``). A sample with a leg out
+    of reach keeps finite closest-reach joints and gets ``info["ik_ok"] = False``
+    (``info["unreachable_legs"]`` lists them, ``info["ik_error_m"]`` the worst miss).
+
+    Returns
+    -------
+    list of State
+        n states; the end ones carry the given states' stratum, support, forces and info
+        (plus the IK keys); interior ones are on the leaf's stratum with no forces.
+
+    """
+    return _interpolate(
+        robot,
+        terrain,
+        state_a,
+        state_b,
+        n,
+        _leaf_stratum(state_a, state_b),
+        swing,
+        clearance_m,
+        liftoff_m,
+    )
+
+
+def interpolate_swing(
+    robot: Robot,
+    terrain: _Terrain,
+    state_lift: State,
+    state_touch: State,
+    n: int,
+    clearance_m: float | None = None,
+    swing_leg: int | None = None,
+    liftoff_m: float | None = None,
+) -> list[State]:
+    """Swing one leg from ``state_lift`` to ``state_touch`` while the base interpolates.
+
+    The swing leg (0-based) is ``swing_leg`` when given, else the leg of a non-zero stratum
+    of either state, else the only foot that moves. Base pose as eq. 6a; the swing foot
+    follows :func:`swing_path` with ``clearance_m`` (default :func:`default_clearance_m`);
+    the other three feet must agree between the states and stay put. See
+    :func:`interpolate_leaf` for IK and the returned states (interior ones on S_{leg+1}).
+    """
+    if swing_leg is None:
+        strata = {int(s.stratum) for s in (state_lift, state_touch)} - {0}
+        if len(strata) > 1:
+            raise ValueError(f"interpolate_swing: states on different strata {sorted(strata)}")
+        if strata:
+            swing_leg = strata.pop() - 1
+        else:
+            moved = [
+                i
+                for i in range(4)
+                if np.linalg.norm(state_lift.feet_W[i] - state_touch.feet_W[i]) > STANCE_TOL_M
+            ]
+            if len(moved) != 1:
+                raise ValueError(
+                    "interpolate_swing: cannot tell the swing leg (both states on S0 and "
+                    f"{len(moved)} feet move); pass swing_leg"
+                )
+            swing_leg = moved[0]
+    if int(swing_leg) not in range(4):
+        raise ValueError(f"interpolate_swing: swing_leg must be 0..3, got {swing_leg!r}")
+    return _interpolate(
+        robot,
+        terrain,
+        state_lift,
+        state_touch,
+        n,
+        int(swing_leg) + 1,
+        "path",
+        clearance_m,
+        liftoff_m,
+    )

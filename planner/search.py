@@ -1,0 +1,101 @@
+"""The search Omega along the trajectory (paper section 7.6, eq. 11).
+
+Omega_1(tau, r_1*..r_4*, i_f) is the set Xi of pairs (Psi, lambda) for which hard
+persuasion Theta1(R_tau(lambda), ...) is feasible on the current leaf of S0. Feasibility
+along lambda is, in practice, an interval starting at the body's current lambda (the COM
+can move forward until a leg runs out of reach or the COM leaves the support), so the
+paper searches it by bisection: each probe is one Theta1 solve, warm-started from the
+last feasible configuration.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from planner.heuristics import reference_directions
+from planner.problems.base import ThetaSolution
+from planner.problems.theta1 import Theta1
+from planner.state import State
+
+
+@dataclass
+class SearchResult:
+    """Xi of eq. 11 (feasible (state, lambda) pairs, sorted by lambda) and the solves made."""
+
+    xi: list[tuple[State, float]] = field(default_factory=list)
+    probes: list[tuple[float, bool]] = field(default_factory=list)
+    last_failure: ThetaSolution | None = None
+
+    @property
+    def best(self) -> tuple[State, float] | None:
+        """The feasible pair with the largest lambda (farthest along tau)."""
+        return self.xi[-1] if self.xi else None
+
+    @property
+    def solves(self) -> int:
+        """Number of Theta1 solves the search made."""
+        return len(self.probes)
+
+
+def omega(
+    problem: Theta1,
+    start: State,
+    tau,
+    lam_from: float,
+    lam_to: float,
+    com_offset_W: np.ndarray | None = None,
+    tol_m: float = 0.004,
+    max_solves: int = 10,
+) -> SearchResult:
+    """Bisection for the largest lambda in [lam_from, lam_to] where Theta1 is feasible.
+
+    Parameters
+    ----------
+    problem : Theta1
+        Hard persuasion, built for the support pattern in use.
+    start : State
+        Current configuration on the leaf (footholds fixed); the first warm start.
+    tau : Trajectory
+        R_tau(lambda) gives the COM targets r_c* = R_tau(lambda) + ``com_offset_W``.
+    lam_from, lam_to : float
+        Search interval [m of arc length]; ``lam_from`` is taken as already reached.
+    com_offset_W : (3,), optional
+        Added to R_tau(lambda) (e.g. to follow tau at the current COM height).
+    tol_m : float
+        Stop when the bracket is shorter than this [m of arc length].
+    max_solves : int
+        Budget of Theta1 solves.
+
+    """
+    offset = np.zeros(3) if com_offset_W is None else np.asarray(com_offset_W, float)
+    out = SearchResult()
+    warm = start
+
+    def probe(lam: float) -> bool:
+        nonlocal warm
+        rc = np.asarray(tau.point(lam), float).reshape(3) + offset
+        u_f, u_n = reference_directions(tau, problem.terrain, rc, lam=lam)
+        sol = problem.solve(warm, rc, u_f, u_n)
+        out.probes.append((float(lam), sol.feasible))
+        if sol.feasible:
+            out.xi.append((sol.state, float(lam)))
+            warm = sol.state
+        else:
+            out.last_failure = sol
+        return sol.feasible
+
+    lo, hi = float(lam_from), float(lam_to)
+    if hi <= lo:
+        return out
+    if probe(hi):
+        return out
+    while hi - lo > tol_m and out.solves < max_solves:
+        mid = 0.5 * (lo + hi)
+        if probe(mid):
+            lo = mid
+        else:
+            hi = mid
+    out.xi.sort(key=lambda pair: pair[1])
+    return out

@@ -1,0 +1,51 @@
+"""The search Omega along the trajectory (section 7.6) by bisection over Theta1."""
+
+import numpy as np
+import pytest
+
+from planner.heuristics import reference_directions
+from planner.problems import Theta1, Theta4
+from planner.robot import load_robot
+from planner.search import omega
+from planner.terrain import load_terrain
+from planner.trajectory import Trajectory
+
+
+@pytest.fixture(scope="module")
+def setup():
+    dog = load_robot("littledog")
+    terrain = load_terrain("flat")
+    placed = Theta4(dog, terrain).solve([0.3, 0.0, 0.15], [1, 0, 0], [0, 0, 1])
+    assert placed.feasible
+    start = placed.state
+    problem = Theta1(dog, terrain, support=(0, 1, 2, 3))
+    com = problem.check.com_W(start)
+    tau = Trajectory.straight(
+        com[:2], com[:2] + [0.5, 0.0], terrain, float(com[2]), footprint_radius_m=0.0
+    )
+    return dog, terrain, start, problem, tau
+
+
+def test_omega_finds_the_end_of_the_feasible_interval(setup):
+    dog, terrain, start, problem, tau = setup
+    res = omega(problem, start, tau, 0.0, 0.2, tol_m=0.004, max_solves=12)
+    assert res.best is not None
+    state, lam = res.best
+    assert lam > 0.02  # the COM can move forward on four fixed feet
+    assert lam < 0.2  # but not 20 cm: the legs run out of reach
+    np.testing.assert_array_equal(state.feet_W, start.feet_W)  # stays on the leaf
+    # the bracket is tight: a little farther along is infeasible
+    fails = [lam_ for lam_, ok in res.probes if not ok]
+    assert fails and min(fails) - lam <= 0.004 + 1e-12
+    rc = tau.point(min(fails))
+    u_f, u_n = reference_directions(tau, terrain, rc, lam=min(fails))
+    assert not problem.solve(state, rc, u_f, u_n).feasible
+    # every element of Xi is feasible with its COM on tau
+    for s, lam_ in res.xi:
+        assert np.linalg.norm(problem.check.com_W(s) - tau.point(lam_)) < 1e-6
+
+
+def test_omega_returns_at_once_when_the_far_end_is_feasible(setup):
+    dog, terrain, start, problem, tau = setup
+    res = omega(problem, start, tau, 0.0, 0.005)
+    assert res.solves == 1 and res.best[1] == pytest.approx(0.005)
