@@ -1,0 +1,61 @@
+"""The gait step queue of section 8.2: legs waiting to step, with push, pop and swap.
+
+Unlike the fixed gait step sequence S of section 8.1, the queue changes while planning:
+a leg that stepped goes to the back (push); a leg whose step failed changes places with
+the next one (swap), so it is retried right after another leg has moved instead of a whole
+gait cycle later (section 8.2, comment ii).
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+from planner.robot import LEG_NAMES
+
+CRAWL = (2, 0, 3, 1)  # HL, FL, HR, FR: the quasi-static crawl (0-based legs)
+
+
+class GaitQueue:
+    """A queue of 0-based leg indices."""
+
+    def __init__(self, legs=CRAWL):
+        legs = [int(i) for i in legs]
+        if not legs or any(i not in range(4) for i in legs):
+            raise ValueError(f"gait queue: legs must be 0..3, got {legs!r}")
+        self._q: deque[int] = deque(legs)
+
+    def pop(self) -> int:
+        """Take the leg at the front."""
+        if not self._q:
+            raise IndexError("gait queue is empty")
+        return self._q.popleft()
+
+    def push(self, leg: int) -> None:
+        """Put a leg at the back (it has stepped)."""
+        self._q.append(int(leg))
+
+    def push_front(self, leg: int) -> None:
+        """Put a leg back at the front."""
+        self._q.appendleft(int(leg))
+
+    def swap(self, leg: int) -> None:
+        """Reinsert a leg that failed one place back: the next leg goes first."""
+        if self._q:
+            nxt = self._q.popleft()
+            self._q.appendleft(int(leg))
+            self._q.appendleft(nxt)
+        else:
+            self._q.append(int(leg))
+
+    def peek(self) -> int:
+        """The leg at the front, left in place."""
+        return self._q[0]
+
+    def __len__(self) -> int:
+        return len(self._q)
+
+    def __iter__(self):
+        return iter(list(self._q))
+
+    def __repr__(self) -> str:
+        return "GaitQueue([" + ", ".join(LEG_NAMES[i] for i in self._q) + "])"
