@@ -448,17 +448,17 @@ def terrain_height_function(terrain) -> ca.Function:
     return ca.Function("terrain_height", [xy], [z, ca.gradient(z, xy)])
 
 
-def sphere_contact_ca(height_fun: ca.Function, centre_W, radius_m: float):
-    """A foot sphere resting on the terrain below its centre (sections 4.4-4.5, 7.4).
+def contact_on_terrain_ca(height_fun: ca.Function, contact_xy, radius_m: float):
+    """A contact point on the terrain and the sphere centre above it (sections 4.4-4.5).
 
-    Returns (gap, contact_W, normal_W, slope2): ``gap = 0`` puts the sphere on the plane
-    tangent to the terrain below its centre (c_z - z_T - rho sqrt(1 + |grad z_T|^2));
-    the contact point is c - rho n with n the pseudo-normal there; ``slope2`` is
-    tan^2 of the terrain's inclination, bounded by mu^2 in section 7.4.
+    The contact point r = (x, y, z_T(x, y)) is parametrised by its horizontal position
+    (decision variables), so f_T(r) = 0 holds exactly; the foot sphere's centre is then
+    r + rho n(r), n the pseudo-normal, exactly as :func:`planner.contact.foot_centre_from_contact`
+    computes it. Returns (contact_W, centre_W, normal_W, slope2) with slope2 = tan^2 of
+    the terrain's inclination at r (bounded by mu^2 in section 7.4).
     """
-    z, grad = height_fun(centre_W[:2])
+    z, grad = height_fun(contact_xy)
     slope2 = ca.sumsqr(grad)
-    root = ca.sqrt(1 + slope2)
-    normal = ca.vertcat(-grad[0], -grad[1], 1) / root
-    gap = centre_W[2] - z - radius_m * root
-    return gap, centre_W - radius_m * normal, normal, slope2
+    normal = ca.vertcat(-grad[0], -grad[1], 1) / ca.sqrt(1 + slope2)
+    contact = ca.vertcat(contact_xy[0], contact_xy[1], z)
+    return contact, contact + radius_m * normal, normal, slope2

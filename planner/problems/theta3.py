@@ -21,9 +21,9 @@ from planner.problems.base import (
     ThetaOptions,
     ThetaProblem,
     ThetaSolution,
+    contact_on_terrain_ca,
     gaussian_ca,
     sigma3_ca,
-    sphere_contact_ca,
     terrain_height_function,
 )
 from planner.state import State
@@ -49,15 +49,18 @@ class Theta3(ThetaProblem):
         R = ca.reshape(rot, 3, 3)
         centre = ca.mtimes(R, self.kin.foot_B_ca(i, th)) + pos
         hfun = terrain_height_function(self.terrain)
-        gap, contact, normal, slope2 = sphere_contact_ca(hfun, centre, r.foot_radius_m)
-        self.constrain("foot_on_terrain", gap)
+        contact_xy = self.var("contact_xy", 2)
+        contact, centre_on, normal, slope2 = contact_on_terrain_ca(
+            hfun, contact_xy, r.foot_radius_m
+        )
+        self.constrain("foot_on_terrain", centre - centre_on)
         if o.slope_limit:
             self.constrain("slope", slope2, -np.inf, self.mu**2)
         self.maximise_log("sigma1", o.weights[0], gaussian_ca(contact - target, o.target_length_m))
         self.maximise_log("sigma2", o.weights[1], 1 + normal[2])  # 1 - g^.n, g^ = -z
         d_theta = th - ca.DM(r.theta_nor[i])
         self.maximise_log("sigma3", o.weights[2], sigma3_ca(d_theta, o))
-        self._contact_fun = ca.Function("contact", [th, pos, rot], [contact])
+        self._contact_fun = ca.Function("contact", [contact_xy], [contact])
 
     def solve(self, state: State, target_W, x0=None) -> ThetaSolution:
         """Theta3(g*, tau, {r_i*}, i_f) of eq. 9 from a state whose leg ``leg`` swings.
@@ -69,16 +72,21 @@ class Theta3(ThetaProblem):
         p = self.pack_params(
             {"p": state.base_position_W, "R": state.base_rotation_W.T.ravel(), "target_W": target_W}
         )
-        start = state.joints_rad[self.leg] if x0 is None else np.asarray(x0, float)
-        return self.solve_packed(p, start)
+        if x0 is None:
+            x0 = self.initial_guess(state)
+        return self.solve_packed(p, np.asarray(x0, float))
+
+    def initial_guess(self, state: State) -> np.ndarray:
+        """Decision vector at ``state``: the leg's joints and its foot's current xy."""
+        foot_B = self.kin.foot_B(self.leg, state.joints_rad[self.leg])
+        centre_W = state.base_rotation_W @ foot_B + state.base_position_W
+        return np.concatenate([state.joints_rad[self.leg], centre_W[:2]])
 
     def _state_from_x(self, x: np.ndarray, p: np.ndarray) -> State:
         base = self._context
-        contact = np.array(
-            self._contact_fun(x, base.base_position_W, p[self._p_slices["R"]])
-        ).ravel()
+        contact = np.array(self._contact_fun(self.x_block(x, "contact_xy"))).ravel()
         joints = base.joints_rad.copy()
-        joints[self.leg] = x
+        joints[self.leg] = self.x_block(x, "theta")
         feet = base.feet_W.copy()
         feet[self.leg] = contact
         return State(base.base_position_W, base.base_rotation_W, feet, joints, stratum=0)

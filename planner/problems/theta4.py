@@ -19,8 +19,8 @@ from planner.problems.base import (
     ThetaProblem,
     ThetaSolution,
     com_W_ca,
+    contact_on_terrain_ca,
     sigma3_ca,
-    sphere_contact_ca,
     terrain_height_function,
 )
 from planner.state import S0, State
@@ -46,10 +46,13 @@ class Theta4(ThetaProblem):
         R = self.rotation(phi)
         centres = self.kin.feet_W_ca(pos, R, th)
         hfun = terrain_height_function(self.terrain)
+        contacts_xy = self.var("contacts_xy", 8)
         gaps, contacts, normals, slopes = [], [], [], []
         for i in range(4):
-            gap, contact, normal, slope2 = sphere_contact_ca(hfun, centres[:, i], r.foot_radius_m)
-            gaps.append(gap)
+            contact, centre_on, normal, slope2 = contact_on_terrain_ca(
+                hfun, contacts_xy[2 * i : 2 * i + 2], r.foot_radius_m
+            )
+            gaps.append(centres[:, i] - centre_on)
             contacts.append(contact)
             normals.append(normal)
             slopes.append(slope2)
@@ -75,7 +78,7 @@ class Theta4(ThetaProblem):
         self.maximise_log("sigma2", o.weights[1], s2)
         d_theta = th - ca.DM(r.theta_nor.ravel())
         self.maximise_log("sigma3", o.weights[2], sigma3_ca(d_theta, o))
-        self._contacts_fun = ca.Function("contacts", [phi, th, pos], [ca.horzcat(*contacts)])
+        self._contacts_fun = ca.Function("contacts", [contacts_xy], [ca.horzcat(*contacts)])
 
     def solve(self, rc_star_W, u_f, u_n, heading_rad: float | None = None) -> ThetaSolution:
         """Theta4(r_c*, tau) of eq. 10: a standing configuration with body origin r_c*."""
@@ -90,6 +93,7 @@ class Theta4(ThetaProblem):
                 self.robot.theta_nor.ravel(),
                 [max(float(u_f @ R0[:, 0]), self.options.sigma_floor)],
                 [max(float(u_n @ R0[:, 2]), self.options.sigma_floor)],
+                (self.kin.feet_B(self.robot.theta_nor) @ R0.T + p[:3])[:, :2].ravel(),
             ]
         )
         return self.solve_packed(p, x0)
@@ -98,7 +102,7 @@ class Theta4(ThetaProblem):
         pos = p[self._p_slices["rc_star"]]
         phi = self.x_block(x, "phi")
         th = self.x_block(x, "theta")
-        contacts = np.array(self._contacts_fun(phi, th, pos)).T
+        contacts = np.array(self._contacts_fun(self.x_block(x, "contacts_xy"))).T
         return State(pos, rotation_from_vector(phi), contacts, th.reshape(4, 3), stratum=S0)
 
     def _violations(self, state: State, x, p) -> dict[str, float]:
