@@ -42,7 +42,11 @@ FEASIBILITY_TOL = 1e-6  # [m, rad, N]: an independent violation above this is in
 class ThetaOptions:
     """Settings shared by the Theta problems; what each trades off.
 
-    weights : gamma_1..gamma_5 of the paper's objective (section 7.3). Raise gamma_4 to
+    weights : gamma_1..gamma_5 of Theta1, Theta2, Theta4 (section 7.3). gamma_1, gamma_2
+        are large because log sigma_1 = log cos(angle) is flat: with 50, a 10 degree tilt
+        or yaw costs about as much as a 0.9 cm COM miss (gamma_4 = 2, com_length 1 cm);
+        with the paper's equal weights the COM term alone decided the posture and the
+        body rolled and yawed by 15 degrees to shift its COM. Raise gamma_4 to
         follow the COM target more tightly; raise gamma_3 for stances nearer theta_nor.
     clearance_m : delta_c, the least height of every vertex of the body box P above the
         terrain (constraint b). Lower it when a step or barrier needs the belly closer.
@@ -54,7 +58,8 @@ class ThetaOptions:
         "Maximum_Iterations_Exceeded", raise max_iter or start nearer (warm start).
     """
 
-    weights: tuple[float, float, float, float, float] = (1.0, 1.0, 1.0, 2.0, 0.5)
+    weights: tuple[float, float, float, float, float] = (50.0, 50.0, 1.0, 2.0, 0.5)
+    placement_weights: tuple[float, float, float] = (1.0, 1.0, 1.0)  # Theta3 gamma_1..3
     clearance_m: float = 0.02
     forces: bool = True
     min_normal_force_frac: float = 0.02
@@ -337,12 +342,7 @@ class ThetaProblem:
         term_dict = {name: float(v) for (name, _, _), v in zip(self._terms, terms, strict=True)}
         diagnosis = ""
         if not feasible:
-            worst_group = max(violations, key=violations.get) if violations else "?"
-            diagnosis = (
-                f"{self.name}: IPOPT status {status}; worst constraint '{worst_group}' "
-                f"violated by {violations.get(worst_group, float('nan')):.3g}"
-            )
-            diagnosis += self._explain(worst_group)
+            diagnosis = self._diagnose(status, violations)
         if feasible:
             self._last_x = x
         return ThetaSolution(
@@ -368,6 +368,18 @@ class ThetaProblem:
             v = np.maximum(self.lbg[sl] - g[sl], g[sl] - self.ubg[sl])
             out[name] = float(max(np.max(v, initial=0.0), 0.0))
         return out
+
+    def _diagnose(self, status: str, violations: dict[str, float]) -> str:
+        """Name the violated groups, most severe first (each relative to its unit scale)."""
+        mg = self.robot.total_mass_kg * 9.81
+        scale = {"forces": 0.01 * mg, "joint_limits": 0.01, "orientation": 0.01, "slope": 0.01}
+        bad = {k: v for k, v in violations.items() if not v <= FEASIBILITY_TOL}
+        if not bad:
+            return f"{self.name}: IPOPT status {status}"
+        order = sorted(bad, key=lambda k: -bad[k] / scale.get(k, 1e-3))
+        unit = {"forces": "N", "joint_limits": "rad", "orientation": "rad", "slope": ""}
+        listed = ", ".join(f"'{k}' by {bad[k]:.3g} {unit.get(k, 'm')}".rstrip() for k in order)
+        return f"{self.name}: IPOPT status {status}; violated: {listed}" + self._explain(order[0])
 
     def _explain(self, group: str) -> str:
         hints = {

@@ -56,10 +56,12 @@ class Theta3(ThetaProblem):
         self.constrain("foot_on_terrain", centre - centre_on)
         if o.slope_limit:
             self.constrain("slope", slope2, -np.inf, self.mu**2)
-        self.maximise_log("sigma1", o.weights[0], gaussian_ca(contact - target, o.target_length_m))
-        self.maximise_log("sigma2", o.weights[1], 1 + normal[2])  # 1 - g^.n, g^ = -z
+        self.maximise_log(
+            "sigma1", o.placement_weights[0], gaussian_ca(contact - target, o.target_length_m)
+        )
+        self.maximise_log("sigma2", o.placement_weights[1], 1 + normal[2])  # 1 - g^.n, g^ = -z
         d_theta = th - ca.DM(r.theta_nor[i])
-        self.maximise_log("sigma3", o.weights[2], sigma3_ca(d_theta, o))
+        self.maximise_log("sigma3", o.placement_weights[2], sigma3_ca(d_theta, o))
         self._contact_fun = ca.Function("contact", [contact_xy], [contact])
 
     def solve(self, state: State, target_W, x0=None) -> ThetaSolution:
