@@ -70,12 +70,82 @@ def _cmd_terrain(args) -> int:
     return 0
 
 
+def _cmd_check(args) -> int:
+    from planner.validate import main_check
+
+    return main_check(args.plan)
+
+
+def _parse_xy(text: str, field: str) -> tuple[float, float]:
+    from planner.errors import InputError
+
+    try:
+        x, y = (float(v) for v in text.split(","))
+    except ValueError:
+        raise InputError(f"--{field}: expected X,Y in metres (e.g. 2.2,0), got '{text}'") from None
+    return x, y
+
+
+def _cmd_plan(args) -> int:
+    import time
+
+    from planner.local.soft import LocalSettings
+    from planner.walk import plan_walk
+
+    settings = LocalSettings(time_budget_s=args.time_budget)
+    goal = _parse_xy(args.goal, "goal")
+    start = _parse_xy(args.start, "start")
+    t0 = time.perf_counter()
+    total = float(np.hypot(goal[0] - start[0], goal[1] - start[1]))
+
+    def progress(dist_m: float, steps: int) -> None:
+        done = max(0.0, min(1.0, 1 - dist_m / max(total, 1e-9)))
+        bar = "#" * int(30 * done)
+        print(
+            f"\r[{bar:<30}] {100 * done:5.1f}%  {steps} steps  {time.perf_counter() - t0:6.1f} s",
+            end="",
+            file=sys.stderr,
+            flush=True,
+        )
+
+    plan, report = plan_walk(
+        args.robot, args.terrain, goal, start, args.planner, settings, progress=progress
+    )
+    print(file=sys.stderr)
+    path = plan.save(args.out)
+    o = plan.outcome
+    print(
+        f"wrote {path}: {len(plan.keyframes)} keyframes, {len(plan.samples.time)} samples, "
+        f"{plan.stats.get('steps')} steps, planning {plan.stats.get('planning_time_s', 0):.1f} s, "
+        f"walk {plan.samples.time[-1]:.1f} s"
+    )
+    print(f"validation: {'ok' if report.ok else report.summary()}")
+    print(("" if o["reached_goal"] else "goal NOT reached: ") + o["message"])
+    return 0 if o["reached_goal"] else 1
+
+
 def _cmd_demo(args) -> int:
+    from pathlib import Path
+
     from planner.robot import load_robot
 
     robot = load_robot("littledog")
     print(robot_summary(robot))
-    return 0
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    print(f"\nplanning LittleDog 2 m over {args.terrain} (soft persuasion, section 8.2) ...")
+    plan_args = argparse.Namespace(
+        robot="littledog",
+        terrain=args.terrain,
+        goal="2.2,0",
+        start="0.2,0",
+        planner="soft",
+        time_budget=120.0,
+        out=str(out / "plan.json"),
+    )
+    rc = _cmd_plan(plan_args)
+    print(f"plan: {out / 'plan.json'}  (check it: stratawalk check {out / 'plan.json'})")
+    return rc
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -89,7 +159,21 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("name", nargs="?", help="terrain name (terrains/NAME.yaml) or YAML path")
     t.add_argument("--png", help="write a top view with height colours to this PNG")
     t.set_defaults(func=_cmd_terrain)
+    pl = sub.add_parser("plan", help="plan a walk and write a stratawalk.plan/1 file")
+    pl.add_argument("--robot", default="littledog")
+    pl.add_argument("--terrain", required=True, help="terrain name or YAML path")
+    pl.add_argument("--goal", required=True, help="X,Y [m]")
+    pl.add_argument("--start", default="0.2,0", help="X,Y [m] (default 0.2,0)")
+    pl.add_argument("--planner", default="soft", choices=["soft"])
+    pl.add_argument("--time-budget", type=float, default=120.0, help="[s]")
+    pl.add_argument("--out", default="plan.json")
+    pl.set_defaults(func=_cmd_plan)
+    c = sub.add_parser("check", help="validate a plan independently (exit 1 on any violation)")
+    c.add_argument("plan", help="plan.json written by `stratawalk plan`")
+    c.set_defaults(func=_cmd_check)
     d = sub.add_parser("demo", help="the main job: LittleDog on a rough course")
+    d.add_argument("--terrain", default="rough2cm")
+    d.add_argument("--out", default="out/demo")
     d.set_defaults(func=_cmd_demo)
     return p
 

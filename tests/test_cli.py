@@ -24,3 +24,18 @@ def test_console_script_entry_point():
         check=True,
     ).stdout
     assert "go1" in out and "RL_calf_joint" in out
+
+
+def test_plan_then_check_from_the_command_line(tmp_path, capsys):
+    out = tmp_path / "plan.json"
+    rc = main(["plan", "--terrain", "flat", "--goal", "0.45,0", "--out", str(out)])
+    text = capsys.readouterr().out
+    assert rc == 0, text
+    assert "validation: ok" in text and "reached the goal" in text
+    assert main(["check", str(out)]) == 0
+
+
+def test_plan_bad_goal_is_one_line_error(capsys):
+    assert main(["plan", "--terrain", "flat", "--goal", "two,0"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "--goal" in err

@@ -243,8 +243,7 @@ class SoftPlanner:
             steps += 1
             self._append(samples, times, body_path, self._body_time(state, moved))
             self._append(samples, times, swing_path, st.swing_time_s)
-            lifted = swing_path[0]
-            keyframes += [moved, lifted, sol3.state]
+            keyframes += [moved, self._swing_keyframe(swing_path, leg, check), sol3.state]
             state = sol3.state
             queue.push(leg)
             if progress is not None:
@@ -265,6 +264,19 @@ class SoftPlanner:
             message=message,
             stats=stats,
         )
+
+    def _swing_keyframe(self, path: list[State], leg: int, check) -> State:
+        """The mid-swing configuration on S_leg, with its eq. 5 forces (3 stance feet)."""
+        from planner.statics import equilibrating_forces
+
+        mid = path[len(path) // 2].copy()
+        mid.stratum = leg + 1
+        mid.support = tuple(i for i in range(4) if i != leg)
+        eq = equilibrating_forces(
+            mid.feet_W, check.com_W(mid), self.robot.total_mass_kg, mid.support
+        )
+        mid.forces_W = None if eq.degenerate else eq.forces
+        return mid
 
     def _body_time(self, a: State, b: State) -> float:
         d = float(np.linalg.norm(b.base_position_W - a.base_position_W))

@@ -1,0 +1,901 @@
+"""``stratawalk check plan.json``: an independent validator of a plan file.
+
+Judges a ``stratawalk.plan/1`` plan (DESIGN.md section 3) with numpy, Pinocchio and the
+exact statics SOCP only; none of the solver's CasADi graphs is used. The robot is rebuilt
+from ``robot.urdf`` (or ``robot.name``) and the terrain from its spec.
+
+Checks (``Violation.kind``), at every sample unless marked keyframe:
+
+``robot_mismatch``
+    The URDF's joint names, foot frames or foot radius differ from the file's.
+``time_order``
+    ``samples.time`` decreases.
+``keyframe_fk`` (keyframes)
+    Pinocchio's foot sphere centre vs the stored foot: ``r + rho n(r)`` for a foot in
+    contact (the smaller of that mismatch and ``|c - rho n - r|`` with n taken under the
+    centre, the two contact-point conventions of :mod:`planner.contact`, equal on planar
+    ground), ``r + rho e_z`` for a swing foot; tolerance 1e-6 m.
+``contact_count``
+    Fewer than three feet in contact (paper section 4.3: quasi-static walking).
+``joint_limits`` (samples and keyframes)
+    A joint beyond the URDF limits by more than 1e-9 rad (section 7.2 c).
+``stance_slip``
+    A foot in contact at two consecutive samples whose sphere centre (from FK), hence its
+    contact point, moves by more than 1e-6 m: stance feet stay put along a leaf (4.3).
+``foot_on_terrain`` (samples and keyframes)
+    A foot not resting on the *smooth* terrain the planner saw, by more than 1e-4 m
+    (section 4.4): ``|f_T(r)|`` of a stored contact point; for a sample, the miss of the
+    better fitting of the two contact conventions (:func:`contact_points_from_centres`)
+    given the FK sphere centre.
+``foot_off_sharp_surface``
+    A contact point farther from the *sharp* terrain than the smoothing width (+1 mm):
+    the solver stands on ``Terrain.height``, which near an edge departs from the real
+    surface by up to half the jump over about the smoothing width, so this looser check
+    bounds how much of that a plan uses.
+``body_clearance``
+    A point of the body box P (its vertices and a ``body_grid_m`` grid on its
+    downward-facing faces, which form its lower envelope) below the sharp terrain.
+``swing_clearance``
+    A swing foot's sphere centre closer to the sharp terrain than ``rho - 1e-4 m`` (the
+    sphere penetrates the real surface).
+``balance``
+    No contact forces inside the friction cones of the feet in contact balance gravity
+    and moments at Pinocchio's whole-body COM (exact SOCP,
+    :func:`planner.statics.static_feasibility`; normals of the smooth terrain; mu of the
+    file).
+``keyframe_forces`` (keyframes)
+    Stored forces do not balance gravity and moments (eq. 4) to 1e-6 m g (moments in N m
+    about the support centroid), or a foot outside ``support`` carries force.
+
+Distances to the sharp surface are Euclidean, to the graph of ``height_sharp`` together
+with its vertical faces: sampled on a 1 mm grid around each point, face positions found
+by bisection between grid nodes whose heights jump (accurate to ~3e-5 m). Exact tests
+run only where a cheap bound (terrain maxima over 2 cm tiles) does not already clear a
+sample, which keeps 2000 samples at a few seconds.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO, TYPE_CHECKING
+
+import numpy as np
+import pinocchio as pin
+from numpy.typing import NDArray
+
+from planner import statics
+from planner.contact import E_Z, contact_from_foot_centre, foot_centre_from_contact
+from planner.errors import PlannerError
+from planner.plan import Plan
+from planner.robot import LEG_NAMES
+
+if TYPE_CHECKING:
+    from planner.robot import Robot
+    from planner.terrain import Terrain
+
+__all__ = [
+    "CheckReport",
+    "CheckTolerances",
+    "Violation",
+    "check_plan",
+    "contact_points_from_centres",
+    "main_check",
+    "sharp_surface_distance",
+]
+
+_Array = NDArray[np.float64]
+GRAVITY_MPS2 = 9.81
+
+
+@dataclass(frozen=True)
+class CheckTolerances:
+    """Tolerances of :func:`check_plan` (SI units: m, rad, N).
+
+    Attributes
+    ----------
+    fk_m : keyframe FK vs stored feet.
+    joint_rad : excursion past a joint limit.
+    slip_m : motion of a foot in contact between consecutive samples.
+    on_terrain_m : ``|f_T|`` of a contact point on the smooth terrain.
+    sharp_surface_m : distance of a contact point from the sharp surface; None: the
+        terrain's largest smoothing width + 1 mm (6 mm by default).
+    body_clearance_m : least height of the body box above the sharp terrain.
+    swing_penetration_m : allowed penetration of a swing foot sphere into the sharp terrain.
+    force_balance_rel : keyframe force/moment residual, as a fraction of m g.
+    min_contacts : feet that must be down at every sample.
+    balance_tol_N : margin the exact statics test must exceed; None: its default.
+    body_grid_m : spacing of the points sampled on the body box's lower faces.
+    surface_step_m : grid step of the sharp-surface distance search.
+
+    """
+
+    fk_m: float = 1e-6
+    joint_rad: float = 1e-9
+    slip_m: float = 1e-6
+    on_terrain_m: float = 1e-4
+    sharp_surface_m: float | None = None
+    body_clearance_m: float = 0.0
+    swing_penetration_m: float = 1e-4
+    force_balance_rel: float = 1e-6
+    min_contacts: int = 3
+    balance_tol_N: float | None = None
+    body_grid_m: float = 0.005
+    surface_step_m: float = 1e-3
+
+
+@dataclass(frozen=True)
+class Violation:
+    """One failed check.
+
+    ``kind`` (see the module docstring), ``where`` ("sample 17" / "keyframe 3" / "robot",
+    0-based indices), the 1-based ``leg`` (or None), the offending ``value`` and its
+    ``limit`` (SI units), and a one-line ``message``.
+    """
+
+    kind: str
+    where: str
+    leg: int | None
+    value: float
+    limit: float
+    message: str
+
+    def __str__(self) -> str:
+        return f"{self.where}: {self.kind}: {self.message}"
+
+
+@dataclass
+class CheckReport:
+    """Outcome of :func:`check_plan`: the violations and a few summary figures.
+
+    ``min_body_clearance_m``: least height of the body box over the sharp terrain (exact
+    at the samples within 1 cm of the ground and the 8 closest, elsewhere the lowest
+    vertex over the highest terrain node under the body);
+    ``min_swing_clearance_m``: least distance of a swing sphere to the sharp surface
+    (negative: penetration; a lower bound where the foot is far up); ``min_balance_margin_N``:
+    least force margin of the statics test; ``max_slip_m``: largest stance-foot motion
+    between samples. NaN when there was nothing to measure.
+    """
+
+    violations: list[Violation] = field(default_factory=list)
+    n_samples: int = 0
+    n_keyframes: int = 0
+    min_body_clearance_m: float = math.nan
+    min_swing_clearance_m: float = math.nan
+    min_balance_margin_N: float = math.nan
+    max_slip_m: float = math.nan
+    elapsed_s: float = 0.0
+    tolerances: CheckTolerances = field(default_factory=CheckTolerances)
+
+    @property
+    def ok(self) -> bool:
+        """True when no check failed."""
+        return not self.violations
+
+    def by_kind(self) -> dict[str, int]:
+        """Number of violations of each kind."""
+        return dict(Counter(v.kind for v in self.violations))
+
+    def summary(self) -> str:
+        """One line: verdict, counts per kind, and the summary figures."""
+        figs = (
+            f"min body clearance {_mm(self.min_body_clearance_m)}, min swing clearance "
+            f"{_mm(self.min_swing_clearance_m)}, min balance margin "
+            f"{self.min_balance_margin_N:.3g} N, max stance slip {_mm(self.max_slip_m)}"
+        )
+        head = f"checked {self.n_samples} samples and {self.n_keyframes} keyframes"
+        if self.ok:
+            return f"{head}: OK ({figs}; {self.elapsed_s:.2f} s)"
+        kinds = ", ".join(f"{k} {n}" for k, n in sorted(self.by_kind().items()))
+        return (
+            f"{head}: FAILED, {len(self.violations)} violations ({kinds}) ({figs}; "
+            f"{self.elapsed_s:.2f} s)"
+        )
+
+
+def _mm(x: float) -> str:
+    return "n/a" if not math.isfinite(x) else f"{1e3 * x:.3g} mm"
+
+
+def _leg(i: int) -> str:
+    return f"leg {i + 1} ({LEG_NAMES[i]})"
+
+
+# --------------------------------------------------------------------------- geometry
+def _rotations_from_quats(q_xyzw: _Array) -> _Array:
+    """(N, 3, 3) rotation matrices of (N, 4) unit quaternions (x, y, z, w)."""
+    q = q_xyzw / np.linalg.norm(q_xyzw, axis=1, keepdims=True)
+    x, y, z, w = q.T
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+            np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+            np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        axis=1,
+    )
+
+
+def sharp_surface_distance(
+    terrain: Terrain, points_W: _Array, radius_m: float, step_m: float = 1e-3
+) -> _Array:
+    """Signed Euclidean distance [m] of points to the sharp terrain surface.
+
+    The surface is the graph of ``terrain.height_sharp`` closed by vertical faces at its
+    jumps. It is sampled on a square grid of ``step_m`` covering ``radius_m`` around each
+    point; where two neighbouring nodes differ by more than ``2 step_m`` the face between
+    them is located by bisection. The sign is that of ``p_z - height_sharp(p_x, p_y)``
+    (negative: under the surface). The magnitude is at most the vertical gap and is
+    clipped to ``radius_m`` (nothing nearer). Error ~ step^2 / (4 d) on smooth parts
+    (2.5e-5 m at 1 mm and d = 1 cm); faces are exact to step / 4096.
+
+    Parameters
+    ----------
+    terrain : Terrain
+        Provides ``height_sharp``.
+    points_W : array (N, 3)
+        Points [m], world frame.
+    radius_m : float
+        Search radius [m].
+    step_m : float
+        Grid step [m].
+
+    Returns
+    -------
+    ndarray (N,)
+        Signed distances [m].
+
+    """
+    p = np.asarray(points_W, dtype=float).reshape(-1, 3)
+    if len(p) == 0:
+        return np.zeros(0)
+    gap = p[:, 2] - np.asarray(terrain.height_sharp(p[:, 0], p[:, 1]), dtype=float).reshape(-1)
+    k = int(math.ceil(radius_m / step_m))
+    u = step_m * np.arange(-k, k + 1)
+    m = len(u)
+    ux, uy = np.meshgrid(u, u)  # [iy, ix]
+    r2 = ux**2 + uy**2
+    best = np.minimum(np.abs(gap), radius_m)
+    chunk = max(1, 200_000 // (m * m))
+    jump = 2.0 * step_m
+    for a in range(0, len(p), chunk):
+        pc = p[a : a + chunk]
+        n = len(pc)
+        hx = pc[:, 0, None, None] + ux[None]
+        hy = pc[:, 1, None, None] + uy[None]
+        h = np.asarray(terrain.height_sharp(hx, hy), dtype=float).reshape(n, m, m)
+        d_graph = np.sqrt(r2[None] + (pc[:, 2, None, None] - h) ** 2)
+        d = d_graph.reshape(n, -1).min(axis=1)
+        for axis in (2, 1):  # faces between x-neighbours, then y-neighbours
+            h0 = h[:, :, :-1] if axis == 2 else h[:, :-1, :]
+            h1 = h[:, :, 1:] if axis == 2 else h[:, 1:, :]
+            sel = np.nonzero(np.abs(h1 - h0) > jump)
+            if not sel[0].size:
+                continue
+            ip, iy, ix = sel
+            xa, ya = hx[ip, iy, ix], hy[ip, iy, ix]
+            dx, dy = (step_m, 0.0) if axis == 2 else (0.0, step_m)
+            xb, yb = xa + dx, ya + dy
+            ha, hb = h0[sel], h1[sel]
+            for _ in range(12):
+                xm, ym = 0.5 * (xa + xb), 0.5 * (ya + yb)
+                hm = np.asarray(terrain.height_sharp(xm, ym), dtype=float).reshape(-1)
+                left = np.abs(hm - ha) > np.abs(hm - hb)  # the jump is in [a, m]
+                xb, yb, hb = np.where(left, xm, xb), np.where(left, ym, yb), np.where(left, hm, hb)
+                xa, ya, ha = np.where(left, xa, xm), np.where(left, ya, ym), np.where(left, ha, hm)
+            lo, hi = np.minimum(ha, hb), np.maximum(ha, hb)
+            z = pc[ip, 2]
+            dz = np.maximum(np.maximum(lo - z, z - hi), 0.0)
+            dface = np.sqrt(
+                (0.5 * (xa + xb) - pc[ip, 0]) ** 2 + (0.5 * (ya + yb) - pc[ip, 1]) ** 2 + dz**2
+            )
+            np.minimum.at(d, ip, dface)
+        best[a : a + n] = np.minimum(best[a : a + n], d)
+    return np.where(gap >= 0.0, 1.0, -1.0) * best
+
+
+def contact_points_from_centres(
+    terrain: Terrain, centres_W: _Array, radius_m: float, refine_above_m: float = 1e-6
+) -> tuple[_Array, _Array]:
+    """Contact points of foot spheres resting on the smooth terrain, and how well they rest.
+
+    Two conventions relate a sphere centre c and its contact point r (paper section 4.5,
+    :mod:`planner.contact`), equal on planar ground and O(rho^2 curvature) apart on curved
+    ground: ``c = r + rho n(r)`` with r on the surface (DESIGN.md section 3; used by the leaf
+    interpolation and Theta1/Theta2), and ``r = c - rho n(c_xy)`` with r on the plane
+    tangent under the centre (Theta3/Theta4). Both are evaluated; each foot gets the one
+    that fits better. The first is solved by Gauss-Newton on ``r_xy`` from the second's
+    point; where the fit is worse than ``refine_above_m`` (where rho times the curvature
+    exceeds 1 the map r -> r + rho n(r) folds and has several roots), from the best node
+    of a 0.25 mm grid within 1.2 rho of the centre.
+
+    Parameters
+    ----------
+    terrain : Terrain
+        Smooth ``height``, ``normal`` and ``f_T``.
+    centres_W : array (N, 3)
+        Sphere centres [m], world frame.
+    radius_m : float
+        Sphere radius rho [m].
+    refine_above_m : float
+        Miss [m] above which the grid search is run.
+
+    Returns
+    -------
+    contacts : ndarray (N, 3)
+        Contact points [m]: ``c - rho n`` with the normal of the better convention (on the
+        terrain when the foot rests on it).
+    miss : ndarray (N,)
+        How far the foot is from resting on the terrain [m]: for the first convention
+        ``|r + rho n(r) - c|`` with r on the surface, for the second ``|f_T(r)|``.
+
+    """
+    c = np.asarray(centres_W, dtype=float).reshape(-1, 3)
+    rho = float(radius_m)
+    r2 = contact_from_foot_centre(terrain, c, rho)
+    miss2 = np.abs(np.atleast_1d(terrain.f_T(r2))).astype(float)
+
+    def residual(xy: _Array, cc: _Array) -> tuple[_Array, _Array]:
+        """Surface point over xy, and its r + rho n(r) - c."""
+        p = np.column_stack([xy, np.asarray(terrain.height(xy[:, 0], xy[:, 1])).reshape(-1)])
+        return p, p + rho * np.asarray(terrain.normal(p)).reshape(-1, 3) - cc
+
+    def gauss_newton(xy: _Array, cc: _Array, steps: int = 8) -> tuple[_Array, _Array]:
+        h = 1e-7
+        for _ in range(steps):
+            f = residual(xy, cc)[1]
+            jac = np.stack(
+                [
+                    (residual(xy + d, cc)[1] - residual(xy - d, cc)[1]) / (2 * h)
+                    for d in (np.array([h, 0.0]), np.array([0.0, h]))
+                ],
+                axis=-1,
+            )  # (N, 3, 2)
+            jtj = np.einsum("nki,nkj->nij", jac, jac) + 1e-12 * np.eye(2)
+            step = np.linalg.solve(jtj, np.einsum("nki,nk->ni", jac, f)[..., None])[..., 0]
+            xy = xy - np.clip(step, -rho, rho)
+        p, f = residual(xy, cc)
+        return p, np.linalg.norm(f, axis=1)
+
+    r1, miss1 = gauss_newton(r2[:, :2].copy(), c)
+    bad = np.flatnonzero(np.minimum(miss1, miss2) > refine_above_m)
+    if len(bad):
+        k = int(math.ceil(1.2 * rho / 2.5e-4))
+        u = 2.5e-4 * np.arange(-k, k + 1)
+        ux, uy = (g.ravel() for g in np.meshgrid(u, u))
+        for j in bad:
+            xy = np.column_stack([c[j, 0] + ux, c[j, 1] + uy])
+            f = np.linalg.norm(residual(xy, c[j])[1], axis=1)
+            p, m = gauss_newton(xy[[int(np.argmin(f))]], c[j][None])
+            if m[0] < miss1[j]:
+                r1[j], miss1[j] = p[0], m[0]
+    # the sphere's point along the normal: r1 itself when the foot rests on the terrain
+    r1 = c - rho * np.asarray(terrain.normal(r1)).reshape(-1, 3)
+    first = miss1 <= miss2
+    return np.where(first[:, None], r1, r2), np.where(first, miss1, miss2)
+
+
+def _unique_contacts(terrain: Terrain, centres_W: _Array, radius_m: float) -> tuple[_Array, _Array]:
+    """:func:`contact_points_from_centres`, solved once per distinct centre.
+
+    A stance foot keeps its sphere centre along a leaf, so a plan's thousands of stance
+    samples hold a few hundred distinct centres.
+    """
+    keys = np.round(np.asarray(centres_W, dtype=float).reshape(-1, 3) / 1e-10)
+    _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    pts, fit = contact_points_from_centres(terrain, centres_W[first], radius_m)
+    return pts[inverse.ravel()], fit[inverse.ravel()]
+
+
+class _TileMax:
+    """Upper bounds of the sharp terrain over rectangles, from lazily evaluated tiles.
+
+    The plane is cut into ``TILE_M`` square tiles; a tile's bound is the largest
+    ``height_sharp`` at its nodes (``NODE_M`` apart, borders included), evaluated once
+    when a query first touches it. ``max_in`` returns the largest bound over the tiles a
+    rectangle meets: the terrain's maximum there, up to features narrower than ``NODE_M``
+    and, on slopes, ``slope * NODE_M`` (callers subtract ``SLACK_M``). Used to skip the
+    exact tests far from the ground.
+    """
+
+    TILE_M = 0.02
+    NODE_M = 0.005
+    SLACK_M = 0.005
+
+    def __init__(self, terrain: Terrain):
+        self.terrain = terrain
+        self.tiles: dict[tuple[int, int], float] = {}
+
+    def max_in(self, boxes: _Array) -> _Array:
+        """Bound (K,) over rectangles (K, 4) ``[x0, x1, y0, y1]`` [m]."""
+        t = self.TILE_M
+        idx = np.column_stack(
+            [np.floor(boxes[:, 0] / t), np.floor(boxes[:, 1] / t),
+             np.floor(boxes[:, 2] / t), np.floor(boxes[:, 3] / t)]
+        ).astype(int)  # fmt: skip
+        ix0, iy0 = idx[:, 0].min(), idx[:, 2].min()
+        shape = (idx[:, 3].max() - iy0 + 1, idx[:, 1].max() - ix0 + 1)
+        need = np.zeros(shape, dtype=bool)
+        for a, b, c, d in idx:
+            need[c - iy0 : d - iy0 + 1, a - ix0 : b - ix0 + 1] = True
+        todo = [
+            (int(ix + ix0), int(iy + iy0))
+            for iy, ix in zip(*np.nonzero(need), strict=True)
+            if (int(ix + ix0), int(iy + iy0)) not in self.tiles
+        ]
+        if todo:
+            n = int(round(t / self.NODE_M)) + 1
+            u = np.linspace(0.0, t, n)
+            ux, uy = (g.ravel() for g in np.meshgrid(u, u))
+            tix = np.array(todo, dtype=float)
+            h = self.terrain.height_sharp(tix[:, :1] * t + ux[None], tix[:, 1:] * t + uy[None])
+            hmax = np.asarray(h, dtype=float).reshape(len(todo), -1).max(axis=1)
+            self.tiles.update(zip(todo, hmax.tolist(), strict=True))
+        grid = np.full(shape, -np.inf)
+        for iy, ix in zip(*np.nonzero(need), strict=True):
+            grid[iy, ix] = self.tiles[(int(ix + ix0), int(iy + iy0))]
+        return np.array([grid[c - iy0 : d - iy0 + 1, a - ix0 : b - ix0 + 1].max()
+                         for a, b, c, d in idx])  # fmt: skip
+
+
+def _body_points_B(robot: Robot, spacing_m: float) -> list[tuple[_Array, _Array]]:
+    """Faces of the body box P: (outward normal, (K, 3) points incl. edges) in body frame."""
+    lo, hi = robot.body_box_B
+    faces = []
+    for axis in range(3):
+        a, b = [j for j in range(3) if j != axis]
+        ua = np.linspace(lo[a], hi[a], max(2, int(math.ceil((hi[a] - lo[a]) / spacing_m)) + 1))
+        ub = np.linspace(lo[b], hi[b], max(2, int(math.ceil((hi[b] - lo[b]) / spacing_m)) + 1))
+        ga, gb = (g.ravel() for g in np.meshgrid(ua, ub))
+        for side, value in ((-1.0, lo[axis]), (1.0, hi[axis])):
+            pts = np.empty((len(ga), 3))
+            pts[:, axis], pts[:, a], pts[:, b] = value, ga, gb
+            normal = np.zeros(3)
+            normal[axis] = side
+            faces.append((normal, pts))
+    return faces
+
+
+def _smoothing_width_m(spec: dict) -> float:
+    """Largest ``smoothing_m`` of a terrain spec and its segments [m]."""
+    from planner.terrain import DEFAULT_SMOOTHING_M
+
+    widths = [float(spec.get("smoothing_m", DEFAULT_SMOOTHING_M))]
+    for seg in spec.get("segments", []) or []:
+        if isinstance(seg, dict) and "smoothing_m" in seg:
+            widths.append(float(seg["smoothing_m"]))
+    return max(widths)
+
+
+# --------------------------------------------------------------------------- the check
+class _Checker:
+    """State shared by the checks of one plan."""
+
+    def __init__(self, plan: Plan, tol: CheckTolerances):
+        self.plan, self.tol = plan, tol
+        self.robot = plan.load_robot()
+        self.terrain = plan.load_terrain()
+        self.model = self.robot.model
+        self.data = self.model.createData()
+        self.foot_ids = [self.model.getFrameId(f) for f in self.robot.foot_frames]
+        self.rho = self.robot.foot_radius_m
+        self.mass = self.robot.total_mass_kg
+        self.mu = float(plan.friction)
+        self.violations: list[Violation] = []
+        self.tiles = _TileMax(self.terrain)
+        self.q_leg = {
+            leg.q_index + j: (leg.index, leg.joint_names[j])
+            for leg in self.robot.legs
+            for j in range(3)
+        }
+
+    def add(self, kind: str, where: str, leg: int | None, value: float, limit: float, msg: str):
+        self.violations.append(
+            Violation(kind, where, None if leg is None else leg + 1, float(value), limit, msg)
+        )
+
+    def kinematics(self, q: _Array) -> tuple[_Array, _Array]:
+        """(4, 3) foot sphere centres and (3,) whole-body COM by Pinocchio."""
+        com = pin.centerOfMass(self.model, self.data, q)  # also runs forward kinematics
+        pin.updateFramePlacements(self.model, self.data)
+        return np.array([self.data.oMf[i].translation for i in self.foot_ids]), np.array(com)
+
+    # ---- file-level ------------------------------------------------------------------
+    def robot_consistency(self) -> None:
+        r, info = self.robot, self.plan.robot
+        for key, mine in (("joint_names", r.joint_names), ("foot_frames", r.foot_frames)):
+            if list(info.get(key, [])) != list(mine):
+                self.add(
+                    "robot_mismatch",
+                    "robot",
+                    None,
+                    1.0,
+                    0.0,
+                    f"robot.{key} {info.get(key)} differ from the URDF's {mine}",
+                )
+        d = abs(float(info.get("foot_radius", r.foot_radius_m)) - r.foot_radius_m)
+        if d > 1e-9:
+            self.add(
+                "robot_mismatch",
+                "robot",
+                None,
+                d,
+                1e-9,
+                f"robot.foot_radius {info['foot_radius']} m differs from the URDF's "
+                f"{r.foot_radius_m} m",
+            )
+
+    def joint_limits(self, q: _Array, where: str) -> None:
+        lo, hi = self.model.lowerPositionLimit, self.model.upperPositionLimit
+        over = np.maximum(lo[7:] - q[7:], q[7:] - hi[7:])
+        for j in np.flatnonzero(over > self.tol.joint_rad):
+            leg, name = self.q_leg[7 + j]
+            self.add(
+                "joint_limits",
+                where,
+                leg,
+                over[j],
+                self.tol.joint_rad,
+                f"{_leg(leg)} joint '{name}' at {q[7 + j]:.6g} rad is {over[j]:.3g} rad beyond "
+                f"[{lo[7 + j]:.6g}, {hi[7 + j]:.6g}] (limit {self.tol.joint_rad:.0e} rad)",
+            )
+
+    # ---- keyframes ------------------------------------------------------------------
+    def keyframes(self) -> None:
+        tol, terrain, rho = self.tol, self.terrain, self.rho
+        for k, kf in enumerate(self.plan.keyframes):
+            where = f"keyframe {k}"
+            q = self.robot.q_from(kf.base_position, kf.base_quaternion, kf.joints)
+            self.joint_limits(q, where)
+            centres, com = self.kinematics(q)
+            down = np.ones(4, dtype=bool)
+            if kf.stratum:
+                down[kf.stratum - 1] = False
+            for i in range(4):
+                r = kf.feet[i]
+                if down[i]:
+                    e1 = np.linalg.norm(centres[i] - foot_centre_from_contact(terrain, r, rho))
+                    e2 = np.linalg.norm(contact_from_foot_centre(terrain, centres[i], rho) - r)
+                    err, ref = min(e1, e2), "contact + rho n"
+                else:
+                    err, ref = np.linalg.norm(centres[i] - (r + rho * E_Z)), "point + rho e_z"
+                if err > tol.fk_m:
+                    self.add(
+                        "keyframe_fk",
+                        where,
+                        i,
+                        err,
+                        tol.fk_m,
+                        f"{_leg(i)} FK sphere centre is {_mm(err)} from the stored foot's "
+                        f"({ref}) (limit {_mm(tol.fk_m)})",
+                    )
+            f_t = np.abs(np.atleast_1d(terrain.f_T(kf.feet)))
+            for i in np.flatnonzero(down & (f_t > tol.on_terrain_m)):
+                self.add(
+                    "foot_on_terrain",
+                    where,
+                    i,
+                    f_t[i],
+                    tol.on_terrain_m,
+                    f"{_leg(i)} stored contact point is {_mm(f_t[i])} off the terrain surface "
+                    f"(limit {_mm(tol.on_terrain_m)})",
+                )
+            if kf.forces is not None:
+                self.keyframe_forces(where, kf, com)
+
+    def keyframe_forces(self, where: str, kf, com: _Array) -> None:
+        weight = self.mass * GRAVITY_MPS2
+        limit = self.tol.force_balance_rel * weight
+        f = kf.forces
+        sup = [i - 1 for i in kf.support]
+        for i in range(4):
+            if i not in sup and np.linalg.norm(f[i]) > limit:
+                self.add(
+                    "keyframe_forces",
+                    where,
+                    i,
+                    np.linalg.norm(f[i]),
+                    limit,
+                    f"{_leg(i)} carries {np.linalg.norm(f[i]):.3g} N but is not in support "
+                    f"{kf.support}",
+                )
+        g = np.array([0.0, 0.0, -GRAVITY_MPS2])
+        o = kf.feet[sup].mean(axis=0) if sup else com
+        res_f = np.linalg.norm(f.sum(axis=0) + self.mass * g)
+        res_m = np.linalg.norm(
+            np.cross(kf.feet - o, f).sum(axis=0) + np.cross(com - o, self.mass * g)
+        )
+        if max(res_f, res_m) > limit:
+            self.add(
+                "keyframe_forces",
+                where,
+                None,
+                max(res_f, res_m),
+                limit,
+                f"stored forces do not balance gravity at the Pinocchio COM: force residual "
+                f"{res_f:.3g} N, moment residual {res_m:.3g} N m (limit {limit:.2g})",
+            )
+
+    # ---- samples --------------------------------------------------------------------
+    def samples(self, report: CheckReport) -> None:
+        sm, tol, terrain, rho = self.plan.samples, self.tol, self.terrain, self.rho
+        n = len(sm)
+        if n == 0:
+            return
+        back = np.flatnonzero(np.diff(sm.time) < 0.0)
+        for k in back:
+            self.add(
+                "time_order",
+                f"sample {k + 1}",
+                None,
+                sm.time[k + 1] - sm.time[k],
+                0.0,
+                f"time {sm.time[k + 1]:.6g} s is before the previous sample's {sm.time[k]:.6g} s",
+            )
+        centres = np.empty((n, 4, 3))
+        coms = np.empty((n, 3))
+        for k in range(n):
+            self.joint_limits(sm.q[k], f"sample {k}")
+            centres[k], coms[k] = self.kinematics(sm.q[k])
+        down = sm.contact
+
+        # contact points (from FK) of the feet in contact, and how far off the terrain
+        contacts = centres - rho * E_Z
+        miss = np.zeros(down.shape)
+        if down.any():
+            contacts[down], miss[down] = _unique_contacts(terrain, centres[down], rho)
+
+        n_down = down.sum(axis=1)
+        for k in np.flatnonzero(n_down < tol.min_contacts):
+            legs = ", ".join(str(i + 1) for i in np.flatnonzero(down[k])) or "none"
+            self.add(
+                "contact_count",
+                f"sample {k}",
+                None,
+                n_down[k],
+                tol.min_contacts,
+                f"only {n_down[k]} feet in contact (legs {legs}); at least "
+                f"{tol.min_contacts} must be down",
+            )
+
+        # stance slip between consecutive samples
+        if n > 1:
+            both = down[1:] & down[:-1]
+            moved = np.linalg.norm(centres[1:] - centres[:-1], axis=2)
+            moved = np.where(both, moved, 0.0)
+            report.max_slip_m = float(moved.max()) if both.any() else math.nan
+            for k, i in zip(*np.nonzero(moved > tol.slip_m), strict=True):
+                self.add(
+                    "stance_slip",
+                    f"sample {k + 1}",
+                    i,
+                    moved[k, i],
+                    tol.slip_m,
+                    f"{_leg(i)} moved {_mm(moved[k, i])} while in contact (limit "
+                    f"{_mm(tol.slip_m)})",
+                )
+
+        # feet on the smooth terrain, and near the sharp one
+        ks, ls = np.nonzero(down)
+        if len(ks):
+            pts = contacts[ks, ls]
+            f_t = miss[ks, ls]
+            for j in np.flatnonzero(f_t > tol.on_terrain_m):
+                self.add(
+                    "foot_on_terrain",
+                    f"sample {ks[j]}",
+                    ls[j],
+                    f_t[j],
+                    tol.on_terrain_m,
+                    f"{_leg(ls[j])} contact point is {_mm(f_t[j])} off the terrain surface "
+                    f"(limit {_mm(tol.on_terrain_m)})",
+                )
+            smooth_w = _smoothing_width_m(self.plan.terrain)
+            sharp_tol = tol.sharp_surface_m if tol.sharp_surface_m is not None else smooth_w + 1e-3
+            vgap = np.abs(pts[:, 2] - np.asarray(terrain.height_sharp(pts[:, 0], pts[:, 1])))
+            far = np.flatnonzero(vgap > sharp_tol)
+            if len(far):
+                d = np.abs(
+                    sharp_surface_distance(terrain, pts[far], sharp_tol + 1e-3, tol.surface_step_m)
+                )
+                for j, dj in zip(far, d, strict=True):
+                    if dj > sharp_tol:
+                        self.add(
+                            "foot_off_sharp_surface",
+                            f"sample {ks[j]}",
+                            ls[j],
+                            dj,
+                            sharp_tol,
+                            f"{_leg(ls[j])} contact point is at least {_mm(dj)} from the sharp "
+                            f"terrain surface (limit {_mm(sharp_tol)}: smoothing width "
+                            f"{_mm(smooth_w)} + 1 mm)",
+                        )
+
+        self.body_clearance(report)
+        self.swing_clearance(centres, report)
+        self.balance(contacts, coms, report)
+
+    def body_clearance(self, report: CheckReport) -> None:
+        """Body box P vs the sharp terrain: a tile bound first, exact points where close."""
+        sm, tol = self.plan.samples, self.tol
+        rot = _rotations_from_quats(sm.q[:, 3:7])
+        verts = np.einsum("nij,kj->nki", rot, self.robot.body_vertices_B) + sm.q[:, None, :3]
+        pad = _TileMax.NODE_M
+        boxes = np.column_stack(
+            [
+                verts[:, :, 0].min(axis=1) - pad,
+                verts[:, :, 0].max(axis=1) + pad,
+                verts[:, :, 1].min(axis=1) - pad,
+                verts[:, :, 1].max(axis=1) + pad,
+            ]
+        )
+        # lowest vertex over the highest terrain node under the footprint: a lower bound
+        bound = verts[:, :, 2].min(axis=1) - self.tiles.max_in(boxes) - _TileMax.SLACK_M
+        faces = _body_points_B(self.robot, tol.body_grid_m)
+        # exact points for the samples within 1 cm of touching, and the 8 closest
+        todo = np.union1d(
+            np.flatnonzero(bound < tol.body_clearance_m + 0.01), np.argsort(bound)[:8]
+        )
+        exact = np.full(len(sm), np.inf)
+        for a in range(0, len(todo), 32):
+            pts, owner = [], []
+            for k in todo[a : a + 32]:
+                for normal, p_b in faces:
+                    if (rot[k] @ normal)[2] < -1e-9:
+                        pts.append(p_b @ rot[k].T + sm.q[k, :3])
+                        owner.append(np.full(len(p_b), k))
+            pts_w = np.concatenate(pts)
+            own = np.concatenate(owner)
+            h = np.asarray(self.terrain.height_sharp(pts_w[:, 0], pts_w[:, 1])).reshape(-1)
+            np.minimum.at(exact, own, pts_w[:, 2] - h)
+        rest = np.setdiff1d(np.arange(len(sm)), todo)
+        best = float(exact.min())
+        if len(rest):  # not measured exactly: lowest vertex over the tile maximum
+            best = min(best, float(bound[rest].min() + _TileMax.SLACK_M))
+        report.min_body_clearance_m = best
+        for k in np.flatnonzero(exact < tol.body_clearance_m):
+            self.add(
+                "body_clearance",
+                f"sample {k}",
+                None,
+                exact[k],
+                tol.body_clearance_m,
+                f"body box reaches {_mm(-exact[k])} below the sharp terrain (least clearance "
+                f"{_mm(tol.body_clearance_m)})",
+            )
+
+    def swing_clearance(self, centres: _Array, report: CheckReport) -> None:
+        """Swing spheres vs the sharp terrain: a tile bound first, distances where close."""
+        sm, tol, rho = self.plan.samples, self.tol, self.rho
+        ks, ls = np.nonzero(~sm.contact)
+        if not len(ks):
+            return
+        c = centres[ks, ls]
+        reach = rho + _TileMax.NODE_M
+        boxes = np.column_stack(
+            [c[:, 0] - reach, c[:, 0] + reach, c[:, 1] - reach, c[:, 1] + reach]
+        )
+        clear = c[:, 2] - rho - self.tiles.max_in(boxes) - _TileMax.SLACK_M  # a lower bound
+        near = np.flatnonzero(clear < 1e-3)
+        if len(near):
+            d = sharp_surface_distance(self.terrain, c[near], rho + 1e-3, tol.surface_step_m)
+            clear[near] = d - rho
+        report.min_swing_clearance_m = float(clear.min())
+        for j in np.flatnonzero(clear < -tol.swing_penetration_m):
+            self.add(
+                "swing_clearance",
+                f"sample {ks[j]}",
+                ls[j],
+                -clear[j],
+                tol.swing_penetration_m,
+                f"{_leg(ls[j])} swing foot sphere penetrates the sharp terrain by "
+                f"{'at least ' if -clear[j] >= rho else ''}{_mm(-clear[j])} (limit "
+                f"{_mm(tol.swing_penetration_m)})",
+            )
+
+    def balance(self, contacts: _Array, coms: _Array, report: CheckReport) -> None:
+        sm, tol = self.plan.samples, self.tol
+        normals = np.tile(E_Z, (len(sm), 4, 1))
+        down = sm.contact
+        if down.any():
+            normals[down] = self.terrain.normal(contacts[down])
+        worst = math.inf
+        for k in range(len(sm)):
+            sup = np.flatnonzero(down[k])
+            if len(sup) < 3:
+                continue
+            res = statics.static_feasibility(
+                contacts[k],
+                coms[k],
+                self.mass,
+                sup,
+                self.mu,
+                normals[k],
+                with_com_margin=False,
+                tol_N=tol.balance_tol_N,
+            )
+            worst = min(worst, res.margin_N)
+            if not res.feasible:
+                legs = ", ".join(str(i + 1) for i in sup)
+                self.add(
+                    "balance",
+                    f"sample {k}",
+                    None,
+                    res.margin_N,
+                    0.0,
+                    f"no contact forces inside the friction cones (mu {self.mu:g}) of legs "
+                    f"{legs} balance gravity at the COM ({coms[k, 0]:.4f}, {coms[k, 1]:.4f}, "
+                    f"{coms[k, 2]:.4f}) m: margin {res.margin_N:.3g} N ({res.status})",
+                )
+        report.min_balance_margin_N = worst if math.isfinite(worst) else math.nan
+
+
+def _order(v: Violation) -> tuple[int, int]:
+    """Sort key: robot, then keyframes, then samples, each by index (stable within)."""
+    head, _, index = v.where.partition(" ")
+    group = {"robot": 0, "keyframe": 1, "sample": 2}.get(head, 3)
+    return group, int(index) if index.isdigit() else -1
+
+
+def check_plan(plan: Plan, tolerances: CheckTolerances | None = None) -> CheckReport:
+    """Validate a plan independently of the solver (see the module docstring).
+
+    Parameters
+    ----------
+    plan : Plan
+        A loaded or built plan (DESIGN.md section 3).
+    tolerances : CheckTolerances, optional
+        Defaults as documented in :class:`CheckTolerances`.
+
+    Returns
+    -------
+    CheckReport
+        ``report.ok`` is True when no check failed; ``report.violations`` lists each
+        failure with its sample or keyframe, in file order.
+
+    Raises
+    ------
+    PlannerError
+        The robot or terrain of the file cannot be rebuilt.
+
+    """
+    t0 = time.perf_counter()
+    tol = tolerances or CheckTolerances()
+    ck = _Checker(plan, tol)
+    report = CheckReport(
+        n_samples=len(plan.samples), n_keyframes=len(plan.keyframes), tolerances=tol
+    )
+    ck.robot_consistency()
+    ck.keyframes()
+    ck.samples(report)
+    report.violations = sorted(ck.violations, key=_order)
+    report.elapsed_s = time.perf_counter() - t0
+    return report
+
+
+def main_check(path: str | Path, out: IO[str] | None = None, err: IO[str] | None = None) -> int:
+    """``stratawalk check PATH``: print each violation and a summary.
+
+    Returns
+    -------
+    int
+        0 if the plan passes, 1 on any violation, 2 if the file cannot be read or its
+        robot or terrain rebuilt (the one-line error goes to ``err``, default stderr).
+
+    """
+    out = sys.stdout if out is None else out
+    err = sys.stderr if err is None else err
+    try:
+        plan = Plan.load(path)
+        report = check_plan(plan)
+    except PlannerError as exc:
+        print(f"stratawalk check: error: {exc}", file=err)
+        return 2
+    for v in report.violations:
+        print(v, file=out)
+    print(f"{path}: {report.summary()}", file=out)
+    return 0 if report.ok else 1

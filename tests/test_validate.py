@@ -1,0 +1,217 @@
+"""The independent plan validator (`stratawalk check`), on real short plans."""
+
+import io
+
+import numpy as np
+import pytest
+
+from planner.interpolate import interpolate_leaf, interpolate_swing
+from planner.kinematics import kinematics_of
+from planner.plan import Plan
+from planner.problems import Theta2, Theta3, Theta4
+from planner.terrain import load_terrain
+from planner.validate import (
+    CheckTolerances,
+    check_plan,
+    contact_points_from_centres,
+    main_check,
+    sharp_surface_distance,
+)
+
+N = 12  # samples per leaf
+OUTCOME = {"reached_goal": True, "distance_to_goal": 0.0, "message": "test plan"}
+
+
+def make_plan(dog, terrain_name, x, step_m):
+    """Place the dog, move the COM over legs 2-4 on S0, swing leg 1 ``step_m`` ahead."""
+    terrain = load_terrain(terrain_name)
+    z = float(terrain.height(x, 0.0)) + 0.15
+    a = Theta4(dog, terrain).solve([x, 0.0, z], [1, 0, 0], [0, 0, 1]).state
+    rc = a.feet_W[[1, 2, 3]].mean(axis=0) + [0.0, 0.0, 0.15]
+    b = Theta2(dog, terrain, support=(1, 2, 3)).solve(a, rc, [1, 0, 0], [0, 0, 1]).state
+    placed = Theta3(dog, terrain, leg=0).solve(b, b.feet_W[0] + [step_m, 0.0, 0.0])
+    assert placed.feasible, placed.diagnosis
+    c = placed.state
+    samples = interpolate_leaf(dog, terrain, a, b, N) + interpolate_swing(dog, terrain, b, c, N)[1:]
+    times = list(0.05 * np.arange(len(samples)))
+    return Plan.build(
+        dog, terrain, terrain.friction, a.base_position_W, c.base_position_W, [a, b, c],
+        samples, times, OUTCOME,
+    )  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def flat_plan(littledog):
+    return make_plan(littledog, "flat", 0.3, 0.04)
+
+
+def edited(plan):
+    """A deep copy of a plan to tamper with."""
+    return Plan.from_dict(plan.to_dict(), source="edited")
+
+
+def kinds_at(report, kind):
+    """Sample/keyframe labels of the violations of one kind."""
+    return {v.where for v in report.violations if v.kind == kind}
+
+
+SWING = range(N, 2 * N - 2)  # samples with leg 1 in the air
+MID_SWING = N + N // 2
+
+
+def test_flat_plan_passes(flat_plan, tmp_path):
+    report = check_plan(flat_plan)
+    assert report.ok, report.summary() + "\n" + "\n".join(map(str, report.violations))
+    assert report.n_samples == 2 * N - 1 and report.n_keyframes == 3
+    assert report.min_body_clearance_m > 0.05
+    assert report.min_balance_margin_N > 0.0 and report.max_slip_m < 1e-9
+    assert not flat_plan.samples.contact[list(SWING), 0].any()
+    # through the file and the CLI entry point
+    path = flat_plan.save(tmp_path / "plan.json")
+    out = io.StringIO()
+    assert main_check(path, out=out) == 0
+    assert "OK" in out.getvalue().splitlines()[-1]
+
+
+def test_step_plan_near_the_edge_passes(littledog):
+    # leg 1 lands ~8 mm before the 5 cm step, on the smoothed ramp: smooth vs sharp terrain
+    plan = make_plan(littledog, "step5cm", 0.66, 0.06)
+    assert 0.78 < plan.keyframes[2].feet[0][0] < 0.8
+    report = check_plan(plan)
+    assert report.ok, "\n".join(map(str, report.violations))
+
+
+def test_sliding_stance_feet_fail(flat_plan):
+    plan = edited(flat_plan)
+    plan.samples.q[5:8, 0] += 0.005  # body 5 mm ahead, same joints: all four feet slide
+    report = check_plan(plan)
+    assert kinds_at(report, "stance_slip") == {"sample 5", "sample 8"}
+    slips = [v for v in report.violations if v.kind == "stance_slip"]
+    assert len(slips) == 8 and {v.leg for v in slips} == {1, 2, 3, 4}
+    assert all(v.value == pytest.approx(0.005, abs=1e-9) for v in slips)
+    msgs = [str(v) for v in slips]
+    assert "sample 5: stance_slip: leg 2 (FR) moved 5 mm while in contact (limit 0.001 mm)" in msgs
+
+
+def test_com_outside_three_feet_fails_balance(flat_plan):
+    plan = edited(flat_plan)
+    k = N - 1  # end of the S0 leaf: COM over the centroid of legs 2, 3, 4
+    plan.samples.contact[k] = [True, True, True, False]  # HR not carrying: COM off FL-FR-HL
+    report = check_plan(plan)
+    assert kinds_at(report, "balance") == {f"sample {k}"}
+    assert report.by_kind() == {"balance": 1}
+    v = report.violations[0]
+    assert v.value < 0.0 and "legs 1, 2, 3" in v.message
+
+
+def test_joint_beyond_limits_fails(flat_plan, littledog):
+    plan = edited(flat_plan)
+    k = MID_SWING
+    leg = littledog.legs[0]  # the swing leg: nothing else moves
+    plan.samples.q[k, leg.q_index + 2] = leg.upper_rad[2] + 0.05
+    report = check_plan(plan)
+    viols = [v for v in report.violations if v.kind == "joint_limits"]
+    assert [(v.where, v.leg) for v in viols] == [(f"sample {k}", 1)]
+    assert viols[0].value == pytest.approx(0.05)
+
+
+def test_two_feet_down_fails(flat_plan):
+    plan = edited(flat_plan)
+    plan.samples.contact[3] = [True, False, True, False]
+    report = check_plan(plan)
+    assert kinds_at(report, "contact_count") == {"sample 3"}
+    assert "only 2 feet in contact (legs 1, 3)" in str(report.violations[0])
+
+
+def test_swing_foot_in_the_ground_fails(flat_plan, littledog):
+    plan = edited(flat_plan)
+    k = MID_SWING
+    q = plan.samples.q[k]
+    state = plan.sample_states()[k]
+    centres = plan.foot_centres_W()[k]
+    centres[0, 2] = littledog.foot_radius_m - 0.004  # sphere 4 mm into the flat ground
+    ik = kinematics_of(littledog).ik(
+        state.base_position_W, state.base_rotation_W, centres, state.joints_rad
+    )
+    assert ik[0].reachable
+    leg = littledog.legs[0]
+    q[leg.q_index : leg.q_index + 3] = ik[0].joints_rad
+    report = check_plan(plan)
+    viols = [v for v in report.violations if v.kind == "swing_clearance"]
+    assert [(v.where, v.leg) for v in viols] == [(f"sample {k}", 1)]
+    assert viols[0].value == pytest.approx(0.004, abs=2e-5)
+    assert report.min_swing_clearance_m == pytest.approx(-0.004, abs=2e-5)
+
+
+def test_keyframe_feet_must_match_fk(flat_plan):
+    plan = edited(flat_plan)
+    plan.keyframes[1].feet[2, 1] += 0.001
+    report = check_plan(plan)
+    fk = [(v.where, v.leg) for v in report.violations if v.kind == "keyframe_fk"]
+    assert fk == [("keyframe 1", 3)]
+    assert report.by_kind().keys() <= {"keyframe_fk", "keyframe_forces"}  # moments moved
+
+
+def test_keyframe_forces_must_balance(flat_plan):
+    plan = edited(flat_plan)
+    plan.keyframes[1].forces[1, 2] += 0.5
+    report = check_plan(plan)
+    assert kinds_at(report, "keyframe_forces") == {"keyframe 1"}
+
+
+def test_body_in_the_ground_fails(flat_plan):
+    plan = edited(flat_plan)
+    plan.samples.q[4, 2] -= 0.2  # body 20 cm down (and feet with it)
+    report = check_plan(plan)
+    assert "sample 4" in kinds_at(report, "body_clearance")
+    assert report.min_body_clearance_m < 0.0
+
+
+def test_main_check_reports_and_fails(flat_plan, tmp_path):
+    plan = edited(flat_plan)
+    plan.samples.contact[3] = [True, False, True, False]
+    path = plan.save(tmp_path / "bad.json")
+    out = io.StringIO()
+    assert main_check(path, out=out) == 1
+    lines = out.getvalue().splitlines()
+    assert lines[0].startswith("sample 3: contact_count: only 2 feet")
+    assert "FAILED" in lines[-1] and "contact_count 1" in lines[-1]
+    (tmp_path / "junk.json").write_text("{")
+    err = io.StringIO()
+    assert main_check(tmp_path / "junk.json", out=out, err=err) == 2
+    assert "not JSON (line 1, column 2)" in err.getvalue()
+    assert len(err.getvalue().strip().splitlines()) == 1
+
+
+def test_tolerances_are_configurable(flat_plan):
+    plan = edited(flat_plan)
+    plan.samples.q[5, 0] += 1e-5  # a 0.01 mm slip
+    assert not check_plan(plan).ok
+    assert check_plan(plan, CheckTolerances(slip_m=1e-4, on_terrain_m=1e-4)).ok
+
+
+def test_sharp_surface_distance_sees_step_faces():
+    terrain = load_terrain("step5cm")  # riser at x = 0.8, 5 cm high
+    pts = np.array(
+        [
+            [0.795, 0.0, 0.02],  # 5 mm in front of the riser, halfway up it
+            [0.70, 0.0, 0.01],  # 1 cm above the lower floor
+            [0.797, 0.0, 0.053],  # off the top corner: sqrt(3^2 + 3^2) mm
+            [0.81, 0.0, 0.04],  # inside the step, 1 cm below its top
+        ]
+    )
+    d = sharp_surface_distance(terrain, pts, 0.012)
+    np.testing.assert_allclose(d, [0.005, 0.01, np.hypot(0.003, 0.003), -0.01], atol=2e-5)
+
+
+def test_contact_points_from_either_convention():
+    terrain = load_terrain("slope10")
+    rho = 0.0103
+    r = np.array([[1.5, 0.1, float(terrain.height(1.5, 0.1))]])
+    from planner.contact import contact_from_foot_centre, foot_centre_from_contact
+
+    c = foot_centre_from_contact(terrain, r, rho)
+    contacts, miss = contact_points_from_centres(terrain, c, rho)
+    np.testing.assert_allclose(contacts, r, atol=1e-9)
+    assert miss[0] < 1e-9
+    np.testing.assert_allclose(contact_from_foot_centre(terrain, c, rho), r, atol=1e-9)
