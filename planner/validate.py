@@ -25,8 +25,8 @@ Checks (``Violation.kind``), at every sample unless marked keyframe:
 ``foot_on_terrain`` (samples and keyframes)
     A foot not resting on the *smooth* terrain the planner saw, by more than 1e-4 m
     (section 4.4): ``|f_T(r)|`` of a stored contact point; for a sample, the miss of the
-    better fitting of the two contact conventions (:func:`contact_points_from_centres`)
-    given the FK sphere centre.
+    contact point r on the surface with ``r + rho n(r)`` = the FK sphere centre
+    (:func:`contact_points_from_centres`).
 ``foot_off_sharp_surface``
     A contact point farther from the *sharp* terrain than the smoothing width (+1 mm):
     the solver stands on ``Terrain.height``, which near an edge departs from the real
@@ -303,13 +303,10 @@ def contact_points_from_centres(
 ) -> tuple[_Array, _Array]:
     """Contact points of foot spheres resting on the smooth terrain, and how well they rest.
 
-    Two conventions relate a sphere centre c and its contact point r (paper section 4.5,
-    :mod:`planner.contact`), equal on planar ground and O(rho^2 curvature) apart on curved
-    ground: ``c = r + rho n(r)`` with r on the surface (DESIGN.md section 3; used by the leaf
-    interpolation and Theta1/Theta2), and ``r = c - rho n(c_xy)`` with r on the plane
-    tangent under the centre (Theta3/Theta4). Both are evaluated; each foot gets the one
-    that fits better. The first is solved by Gauss-Newton on ``r_xy`` from the second's
-    point; where the fit is worse than ``refine_above_m`` (where rho times the curvature
+    The contract (DESIGN.md section 3, :mod:`planner.contact`): ``c = r + rho n(r)`` with
+    r on the surface. It is solved by Gauss-Newton on ``r_xy`` from the point
+    ``c - rho n(c_xy)`` (the tangent plane under the centre, exact on planar ground); where
+    the fit is worse than ``refine_above_m`` (where rho times the curvature
     exceeds 1 the map r -> r + rho n(r) folds and has several roots), from the best node
     of a 0.25 mm grid within 1.2 rho of the centre.
 
@@ -330,8 +327,8 @@ def contact_points_from_centres(
         Contact points [m]: ``c - rho n`` with the normal of the better convention (on the
         terrain when the foot rests on it).
     miss : ndarray (N,)
-        How far the foot is from resting on the terrain [m]: for the first convention
-        ``|r + rho n(r) - c|`` with r on the surface, for the second ``|f_T(r)|``.
+        How far the foot is from resting on the terrain [m]: ``|r + rho n(r) - c|`` with r
+        on the surface.
 
     """
     c = np.asarray(centres_W, dtype=float).reshape(-1, 3)
@@ -375,8 +372,8 @@ def contact_points_from_centres(
                 r1[j], miss1[j] = p[0], m[0]
     # the sphere's point along the normal: r1 itself when the foot rests on the terrain
     r1 = c - rho * np.asarray(terrain.normal(r1)).reshape(-1, 3)
-    first = miss1 <= miss2
-    return np.where(first[:, None], r1, r2), np.where(first, miss1, miss2)
+    del miss2  # r2 (tangent plane under the centre) only seeds the solve
+    return r1, miss1
 
 
 def _unique_contacts(terrain: Terrain, centres_W: _Array, radius_m: float) -> tuple[_Array, _Array]:
@@ -558,9 +555,8 @@ class _Checker:
             for i in range(4):
                 r = kf.feet[i]
                 if down[i]:
-                    e1 = np.linalg.norm(centres[i] - foot_centre_from_contact(terrain, r, rho))
-                    e2 = np.linalg.norm(contact_from_foot_centre(terrain, centres[i], rho) - r)
-                    err, ref = min(e1, e2), "contact + rho n"
+                    err = np.linalg.norm(centres[i] - foot_centre_from_contact(terrain, r, rho))
+                    ref = "contact + rho n"
                 else:
                     err, ref = np.linalg.norm(centres[i] - (r + rho * E_Z)), "point + rho e_z"
                 if err > tol.fk_m:
