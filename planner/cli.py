@@ -175,6 +175,9 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--terrain", default="rough2cm")
     d.add_argument("--out", default="out/demo")
     d.set_defaults(func=_cmd_demo)
+    from planner.bench import add_bench_parser
+
+    add_bench_parser(sub)
     return p
 
 
