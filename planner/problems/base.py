@@ -252,6 +252,19 @@ class ThetaProblem:
         if weight:
             self._terms.append((name, float(weight), sigma))
 
+    def constrain_body_pose(self, pos, R, phi, s1, s2, u_f, u_n) -> None:
+        """Constraints (a), (b) of section 7.2 and the sigma1, sigma2 slack equalities.
+
+        (a) |theta omega| <= pi; (b) every vertex of the body box P at least delta_c above
+        the terrain; s1 = u_f . R e_x and s2 = u_n . R e_z (sigma1, sigma2 of 7.2).
+        """
+        verts = ca.mtimes(R, ca.DM(self.robot.body_vertices_B.T)) + ca.repmat(pos, 1, 8)
+        clear = ca.vertcat(*[self.terrain.f_T_ca(verts[:, k]) for k in range(8)])
+        self.constrain("orientation", ca.dot(phi, phi), -np.inf, np.pi**2)
+        self.constrain("clearance", clear, self.options.clearance_m, np.inf)
+        self.constrain("sigma1", s1 - ca.dot(u_f, R[:, 0]))
+        self.constrain("sigma2", s2 - ca.dot(u_n, R[:, 2]))
+
     def rotation(self, phi):
         """R(phi) from the rotation-vector half of eps(g) (section 4.7)."""
         return rotation_from_vector_ca(phi)

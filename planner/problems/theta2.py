@@ -65,12 +65,7 @@ class Theta2(ThetaProblem):
 
         R = self.rotation(phi)
         self.constrain("contact", ca.vec(self.kin.feet_W_ca(pos, R, th)) - centres)
-        self.constrain("orientation", ca.dot(phi, phi), -np.inf, np.pi**2)
-        verts = ca.mtimes(R, ca.DM(r.body_vertices_B.T)) + ca.repmat(pos, 1, 8)
-        clear = ca.vertcat(*[self.terrain.f_T_ca(verts[:, k]) for k in range(8)])
-        self.constrain("clearance", clear, o.clearance_m, np.inf)
-        self.constrain("sigma1", s1 - ca.dot(u_f, R[:, 0]))
-        self.constrain("sigma2", s2 - ca.dot(u_n, R[:, 2]))
+        self.constrain_body_pose(pos, R, phi, s1, s2, u_f, u_n)
         com = com_W_ca(self, pos, R, th)
         if self.fix_com:
             self.constrain("com", com - rc)

@@ -59,12 +59,7 @@ class Theta4(ThetaProblem):
         self.constrain("foot_on_terrain", ca.vertcat(*gaps))
         if o.slope_limit:
             self.constrain("slope", ca.vertcat(*slopes), -np.inf, self.mu**2)
-        self.constrain("orientation", ca.dot(phi, phi), -np.inf, np.pi**2)
-        verts = ca.mtimes(R, ca.DM(r.body_vertices_B.T)) + ca.repmat(pos, 1, 8)
-        clear = ca.vertcat(*[self.terrain.f_T_ca(verts[:, k]) for k in range(8)])
-        self.constrain("clearance", clear, o.clearance_m, np.inf)
-        self.constrain("sigma1", s1 - ca.dot(u_f, R[:, 0]))
-        self.constrain("sigma2", s2 - ca.dot(u_n, R[:, 2]))
+        self.constrain_body_pose(pos, R, phi, s1, s2, u_f, u_n)
         if o.forces:
             com = com_W_ca(self, pos, R, th)
             F = statics.equilibrating_forces_ca(contacts, com, r.total_mass_kg, (0, 1, 2, 3))
