@@ -29,8 +29,9 @@ from planner.interpolate import interpolate_leaf, interpolate_swing
 from planner.kinematics import kinematics_of
 from planner.local.gait_queue import CRAWL, GaitQueue
 from planner.problems import Theta2, Theta3, Theta4, ThetaOptions
+from planner.problems.base import ConstraintCheck
 from planner.robot import LEG_NAMES
-from planner.state import S0, State
+from planner.state import State
 from planner.trajectory import Trajectory
 
 
@@ -199,7 +200,7 @@ class SoftPlanner:
         last_failure = ""
         step_scale = {i: 1.0 for i in range(4)}
         message = ""
-        check = self.theta2((0, 1, 2, 3)).check
+        check = ConstraintCheck(self.robot, self.terrain, st.theta)
 
         def com_xy(s):
             return check.com_W(s)[:2]
@@ -294,4 +295,4 @@ class SoftPlanner:
             times.append(t0 + duration_s * j / k)
 
 
-__all__ = ["LocalPlan", "LocalSettings", "SoftPlanner", "S0"]
+__all__ = ["LocalPlan", "LocalSettings", "SoftPlanner"]

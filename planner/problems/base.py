@@ -33,7 +33,7 @@ import pinocchio as pin
 from planner import statics
 from planner.kinematics import kinematics_of
 from planner.lie import coords_from_pose, pose_from_coords, rotation_from_vector_ca
-from planner.state import State, contact_mask
+from planner.state import State
 
 FEASIBILITY_TOL = 1e-6  # [m, rad, N]: an independent violation above this is infeasible
 
@@ -221,8 +221,6 @@ class ThetaProblem:
         self._declare()
         self._build()
         self.build_time_s = time.perf_counter() - t0
-        self._last_x: np.ndarray | None = None
-        self._last_lam_g: np.ndarray | None = None
 
     # ---- declaration helpers ----------------------------------------------------------
     def var(self, name: str, n: int, lb=-np.inf, ub=np.inf) -> ca.SX:
@@ -356,8 +354,6 @@ class ThetaProblem:
         diagnosis = ""
         if not feasible:
             diagnosis = self._diagnose(status, violations)
-        if feasible:
-            self._last_x = x
         return ThetaSolution(
             problem=self.name,
             status=status,
@@ -427,11 +423,6 @@ def _log(sigma):
     return ca.log(sigma)
 
 
-def foot_centres_W_ca(problem: ThetaProblem, p_W, R_W, joints12):
-    """(3 x 4) foot sphere centres in world frame (eq. 2 then the base pose)."""
-    return problem.kin.feet_W_ca(p_W, R_W, joints12)
-
-
 def com_W_ca(problem: ThetaProblem, p_W, R_W, joints12):
     """Centre of mass in world frame (whole-body or body link only)."""
     return p_W + ca.mtimes(
@@ -459,11 +450,6 @@ def state_from_pose_coords(eps: np.ndarray, feet_W, joints, stratum: int, suppor
     """A :class:`State` from compact exponential coordinates eps = [p, phi]."""
     g = pose_from_coords(eps)
     return State(g[:3, 3], g[:3, :3], feet_W, joints, stratum=stratum, support=tuple(support))
-
-
-def stance_legs(stratum: int) -> list[int]:
-    """0-based legs on the terrain in a stratum."""
-    return [int(i) for i in np.flatnonzero(contact_mask(stratum))]
 
 
 def terrain_height_function(terrain) -> ca.Function:
