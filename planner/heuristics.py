@@ -38,11 +38,17 @@ __all__ = [
     "reference_directions",
     "body_pose_on_trajectory",
     "normal_foot_centre_W",
+    "foothold_hazard",
+    "safe_foothold",
 ]
 
 _Array = NDArray[np.float64]
 STEP_FRACTION_OF_REACH = 0.35  # default stride = 0.35 * leg reach (0.063 m for LittleDog)
 DEFAULT_NORMAL_RADIUS_M = 0.1  # [m] smoothing radius of u_n when no robot is given
+EDGE_MARGIN_M = 0.015  # a foothold keeps this much beyond the foot radius from an edge [m]
+WALL_RADIUS_M = 0.04  # a foothold this close to a higher edge (a riser, a pit wall) is refused
+WALL_HEIGHT_M = 0.01  # ... when the top of that edge is this much higher [m]
+HAZARD_GRID_M = 0.003  # sampling step of the sharp terrain around a foothold [m]
 
 
 class _Terrain(Protocol):
@@ -279,3 +285,86 @@ def lambda_t(
     p, R = body_pose_on_trajectory(robot, terrain, tau, float(tau.clip(lam_star + step)), radius_m)
     c = normal_foot_centre_W(robot, p, R, i_f)
     return np.array([c[0], c[1], float(np.asarray(terrain.height(c[0], c[1]), dtype=float))])
+
+
+# ---- safe footholds (beyond the paper) -------------------------------------------------------
+def foothold_hazard(
+    terrain,
+    point_W: ArrayLike,
+    radius_m: float,
+    mu: float = 0.7,
+    edge_margin_m: float = EDGE_MARGIN_M,
+) -> str:
+    """Why a contact point is a poor foothold, or "" when it is a good one.
+
+    Judged on the *sharp* terrain (``height_sharp``, what the validator and the world see),
+    sampled every ``HAZARD_GRID_M`` on a square around the point: an *edge* is a pair of
+    neighbouring samples whose slope exceeds ``mu`` (steeper than the friction cone allows,
+    which covers every step, riser, gap and stone edge). Refused: an edge within
+    ``radius_m + edge_margin_m`` (the foot would rest on or slip off it), or an edge within
+    ``WALL_RADIUS_M`` whose top is ``WALL_HEIGHT_M`` above the point (a toe against a riser
+    or at the bottom of a pit). Smooth ground, however rough, has no edge.
+    """
+    p = np.asarray(point_W, float).reshape(3)
+    r_edge = float(radius_m) + float(edge_margin_m)
+    half = max(r_edge, WALL_RADIUS_M)
+    n = int(np.ceil(half / HAZARD_GRID_M))
+    u = np.arange(-n, n + 1) * HAZARD_GRID_M
+    X, Y = np.meshgrid(p[0] + u, p[1] + u, indexing="xy")
+    H = np.asarray(terrain.height_sharp(X, Y), float)
+    R = np.hypot(X - p[0], Y - p[1])
+    steep_x = np.abs(np.diff(H, axis=1)) > mu * HAZARD_GRID_M
+    steep_y = np.abs(np.diff(H, axis=0)) > mu * HAZARD_GRID_M
+    edge = np.zeros(H.shape, bool)
+    edge[:, 1:] |= steep_x
+    edge[:, :-1] |= steep_x
+    edge[1:, :] |= steep_y
+    edge[:-1, :] |= steep_y
+    if np.any(edge & (R <= r_edge)):
+        return f"an edge within {r_edge * 100:.1f} cm"
+    near = edge & (R <= WALL_RADIUS_M)
+    h0 = float(np.asarray(terrain.height_sharp(p[0], p[1]), float))
+    if np.any(near) and float(H[near].max()) > h0 + WALL_HEIGHT_M:
+        return (
+            f"an edge {float(H[near].max()) - h0:.3f} m higher within {WALL_RADIUS_M * 100:.0f} cm"
+        )
+    return ""
+
+
+def safe_foothold(
+    terrain,
+    target_W: ArrayLike,
+    forward_W: ArrayLike,
+    radius_m: float,
+    mu: float = 0.7,
+    max_shift_m: float = 0.06,
+    step_m: float = 0.01,
+    lateral_m: tuple[float, ...] = (0.0, 0.015, -0.015, 0.03, -0.03),
+) -> tuple[np.ndarray, str]:
+    """The foothold nearest ``target_W`` without a :func:`foothold_hazard` (beyond the paper).
+
+    Lambda_t (eq. 13) knows nothing of edges; on steps, stairs, gaps and stones its target
+    often lands on an edge, where Theta3 (which sees the smoothed terrain) either fails or
+    puts the foot where the real, sharp terrain does not hold it. Candidates are the
+    target shifted along ``forward_W`` by 0, -s, +s, -2s, ... up to ``max_shift_m`` (back
+    first: a shorter stride is the cautious choice), then with lateral offsets. Returns
+    (point on the terrain, "") or (the original target, the hazard) when none is safe.
+    """
+    t = np.asarray(target_W, float).reshape(3)
+    f = np.asarray(forward_W, float).reshape(3).copy()
+    f[2] = 0.0
+    nf = float(np.linalg.norm(f))
+    f = np.array([1.0, 0.0, 0.0]) if nf < 1e-9 else f / nf
+    side = np.array([-f[1], f[0], 0.0])
+    k = int(round(max_shift_m / step_m))
+    shifts = [0.0] + [s * j * step_m for j in range(1, k + 1) for s in (-1.0, 1.0)]
+    first = ""
+    for lat in lateral_m:
+        for d in shifts:
+            c = t + d * f + lat * side
+            c[2] = float(np.asarray(terrain.height(c[0], c[1]), float))
+            why = foothold_hazard(terrain, c, radius_m, mu)
+            if not why:
+                return c, ""
+            first = first or why
+    return t, first

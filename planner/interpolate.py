@@ -87,7 +87,7 @@ class SwingPath:
     centres_W : (n, 3) sphere centres [m], continuous along the path.
     phase : (n,) index into :data:`PHASES` (0 liftoff, 1 rise, 2 travel, 3 descend,
         4 touchdown) of each sample.
-    travel_z_m : height of the stored point during the travel phase [m].
+    travel_z_m : highest height of the stored point during the travel phase [m].
     corners_W : (6, 3) sphere-centre corners: lift centre, end of liftoff, top of rise, end
         of travel, start of touchdown, touch centre.
 
@@ -105,25 +105,50 @@ def _on_terrain(terrain: _Terrain, p: _Array) -> bool:
     return abs(p[2] - float(np.asarray(terrain.height(p[0], p[1])))) <= ON_TERRAIN_TOL_M
 
 
-def _track_max_height(
-    terrain: _Terrain, segments: list[tuple[_Array, _Array]], step_m: float, margin_m: float
-) -> float:
-    """Max terrain height (sharp and smooth) over xy segments dilated by ``margin_m``."""
-    pts = []
-    for a, b in segments:
-        m = max(2, int(np.ceil(np.linalg.norm(b - a) / step_m)) + 1)
-        pts.append(a + np.linspace(0.0, 1.0, m)[:, None] * (b - a))
-    xy = np.concatenate(pts)
-    if margin_m > 0:
-        ang = np.linspace(0.0, 2.0 * np.pi, 12, endpoint=False)
-        dirs = np.column_stack([np.cos(ang), np.sin(ang)])
-        ring = np.concatenate([np.zeros((1, 2)), 0.5 * margin_m * dirs, margin_m * dirs])
-        xy = (xy[:, None, :] + ring[None, :, :]).reshape(-1, 2)
-    h = np.asarray(terrain.height(xy[:, 0], xy[:, 1]), dtype=float)
+def _travel_profile(
+    terrain: _Terrain,
+    a1: _Array,
+    a4: _Array,
+    clearance_m: float,
+    rho: float,
+    track_step_m: float,
+    slope: float,
+) -> _Array:
+    """Sphere-centre points (m, 3) of the travel piece from above a1 to above a4.
+
+    z(u) = max over track points u' of (z_req(u') - slope |u - u'|), with z_req the highest
+    terrain within rho + track_step of the track point plus clearance + rho, and the liftoff
+    corners a1, a4 as requirements at the two ends.
+    """
+    length = float(np.linalg.norm(a4[:2] - a1[:2]))
+    m = max(2, int(np.ceil(length / track_step_m)) + 1)
+    u = np.linspace(0.0, 1.0, m)
+    xy = a1[:2] + u[:, None] * (a4[:2] - a1[:2])
+    margin = rho + track_step_m
+    ang = np.linspace(0.0, 2.0 * np.pi, 12, endpoint=False)
+    dirs = np.column_stack([np.cos(ang), np.sin(ang)])
+    ring = np.concatenate([np.zeros((1, 2)), 0.5 * margin * dirs, margin * dirs])
+    pts = (xy[:, None, :] + ring[None, :, :]).reshape(-1, 2)
+    h = np.asarray(terrain.height(pts[:, 0], pts[:, 1]), dtype=float)
     sharp = getattr(terrain, "height_sharp", None)
     if sharp is not None:
-        h = np.maximum(h, np.asarray(sharp(xy[:, 0], xy[:, 1]), dtype=float))
-    return float(h.max())
+        h = np.maximum(h, np.asarray(sharp(pts[:, 0], pts[:, 1]), dtype=float))
+    z_req = h.reshape(m, -1).max(axis=1) + clearance_m + rho
+    z_req[0] = max(z_req[0], a1[2])
+    z_req[-1] = max(z_req[-1], a4[2])
+    dist = np.abs(u[:, None] - u[None, :]) * length
+    z = (z_req[None, :] - slope * dist).max(axis=1)
+    return np.column_stack([xy, z])
+
+
+def _along_polyline(poly: _Array, w: _Array) -> _Array:
+    """Points at arc-length fractions ``w`` in [0, 1] along a polyline (m, 3)."""
+    seg = np.linalg.norm(np.diff(poly, axis=0), axis=1)
+    cum = np.concatenate([[0.0], np.cumsum(seg)])
+    if cum[-1] <= 0.0:
+        return np.repeat(poly[:1], len(w), axis=0)
+    t = np.clip(w, 0.0, 1.0) * cum[-1]
+    return np.column_stack([np.interp(t, cum, poly[:, k]) for k in range(3)])
 
 
 def swing_path(
@@ -135,18 +160,21 @@ def swing_path(
     radius_m: float = 0.0,
     liftoff_m: float | None = None,
     track_step_m: float = 0.002,
+    slope: float = 1.0,
 ) -> SwingPath:
     """Plan a swing foot's path from ``lift_W`` to ``touch_W`` (beyond eq. 6a).
 
     In sphere-centre space (centre = contact + rho n at a foot on the terrain, stored point
-    + rho e_z in the air) the path joins six corners by straight pieces: liftoff along the
-    lift point's normal by ``liftoff_m``; vertical rise to the travel height; straight xy
-    travel at that height; vertical descent; touchdown along the touch point's normal. The
-    travel height puts the stored point (the sphere's lowest point) ``clearance_m`` above
-    the highest terrain (max of ``height_sharp`` and ``height``) under the xy track of the
-    straight segment lift -> touch and of the travel piece, sampled every ``track_step_m``
-    and widened by the foot radius; it is raised to the liftoff corners if those are higher.
-    Each piece is traversed with a smootherstep in s, its share of s proportional to its
+    + rho e_z in the air) the path has five pieces: liftoff along the lift point's normal
+    by ``liftoff_m``; vertical rise to the travel profile; travel along the profile above
+    the straight xy track; vertical descent; touchdown along the touch point's normal. The
+    travel profile follows the terrain: above each track point the stored point (the
+    sphere's lowest point) is at least ``clearance_m`` above the highest terrain (max of
+    ``height_sharp`` and ``height``, sampled every ``track_step_m`` and widened by the foot
+    radius), and it rises and falls no steeper than ``slope`` (dz per metre of track), so
+    the foot lifts only as high as the ground ahead needs: a leg stepping onto a step
+    from far behind folds less than with one travel height over the whole track. Each
+    piece is traversed with a smootherstep in s, its share of s proportional to its
     length, so the path is C2 in s and stops at each corner (quasi-static; corners are not
     cut, so a foot next to a step face does not hit it).
 
@@ -169,6 +197,8 @@ def swing_path(
         Distance travelled along the normals at both ends [m]; default ``clearance_m / 2``.
     track_step_m : float
         Sampling step of the terrain under the track [m].
+    slope : float
+        Steepest rise or fall of the travel profile [m per m of track].
 
     Returns
     -------
@@ -195,14 +225,13 @@ def swing_path(
             c = p + rho * E_Z
             ends.append((p, c, c))
     (p0, c0, a1), (p1, c1, a4) = ends
-    top = _track_max_height(
-        terrain, [(p0[:2], p1[:2]), (a1[:2], a4[:2])], track_step_m, rho + track_step_m
-    )
-    travel_z = max(top + float(clearance_m), a1[2] - rho, a4[2] - rho)
-    a2 = np.array([a1[0], a1[1], travel_z + rho])
-    a3 = np.array([a4[0], a4[1], travel_z + rho])
+    prof = _travel_profile(terrain, a1, a4, float(clearance_m), rho, track_step_m, slope)
+    travel_z = float(prof[:, 2].max()) - rho
+    a2, a3 = prof[0], prof[-1]
     corners = np.array([c0, a1, a2, a3, a4, c1])
+    travel_len = float(np.linalg.norm(np.diff(prof, axis=0), axis=1).sum())
     lengths = np.linalg.norm(np.diff(corners, axis=0), axis=1)
+    lengths[2] = travel_len
     total = lengths.sum()
     if total <= 0.0:
         frac = np.array([0.0, 0.0, 0.0, 1.0, 1.0, 1.0])  # no motion: all "travel"
@@ -212,7 +241,11 @@ def swing_path(
     phase = np.clip(np.searchsorted(frac, s, side="right") - 1, 0, 4)
     width = np.maximum(frac[phase + 1] - frac[phase], 1e-300)
     u = np.where(frac[phase + 1] > frac[phase], (s - frac[phase]) / width, 1.0)
-    centres = corners[phase] + _smootherstep(u)[:, None] * (corners[phase + 1] - corners[phase])
+    w = _smootherstep(u)[:, None]
+    centres = corners[phase] + w * (corners[phase + 1] - corners[phase])
+    travel = phase == 2
+    if np.any(travel):
+        centres[travel] = _along_polyline(prof, w[travel, 0])
     centres[0], centres[-1] = c0, c1
     points = centres - rho * E_Z
     points[0], points[-1] = p0, p1

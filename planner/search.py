@@ -48,6 +48,7 @@ def omega(
     com_offset_W: np.ndarray | None = None,
     tol_m: float = 0.004,
     max_solves: int = 10,
+    swing_target_W: np.ndarray | None = None,
 ) -> SearchResult:
     """Bisection for the largest lambda in [lam_from, lam_to] where Theta1 is feasible.
 
@@ -67,6 +68,8 @@ def omega(
         Stop when the bracket is shorter than this [m of arc length].
     max_solves : int
         Budget of Theta1 solves.
+    swing_target_W : (3,), optional
+        Next foothold of the leg that will swing (Theta2's swing-ready constraint).
 
     """
     offset = np.zeros(3) if com_offset_W is None else np.asarray(com_offset_W, float)
@@ -77,7 +80,7 @@ def omega(
         nonlocal warm
         rc = np.asarray(tau.point(lam), float).reshape(3) + offset
         u_f, u_n = reference_directions(tau, problem.terrain, rc, lam=lam)
-        sol = problem.solve(warm, rc, u_f, u_n)
+        sol = problem.solve(warm, rc, u_f, u_n, swing_target_W)
         out.probes.append((float(lam), sol.feasible))
         if sol.feasible:
             out.xi.append((sol.state, float(lam)))

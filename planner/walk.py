@@ -10,13 +10,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from planner.local.soft import LocalSettings, SoftPlanner
+from planner.local.base import LocalSettings
+from planner.local.hard import HardPlanner
+from planner.local.recursive import RecursivePlanner
+from planner.local.soft import SoftPlanner
 from planner.plan import Plan
 from planner.robot import load_robot
 from planner.terrain import load_terrain
 from planner.validate import check_plan
 
-PLANNERS = ("soft",)
+PLANNERS = {"soft": SoftPlanner, "hard": HardPlanner, "recursive": RecursivePlanner}
 
 
 def plan_walk(
@@ -34,13 +37,12 @@ def plan_walk(
     budget of ``settings`` stops planning; the plan so far is still returned.
     """
     if planner not in PLANNERS:
-        raise ValueError(
-            f"planner: unknown '{planner}'; available: {', '.join(PLANNERS)} "
-            "(hard and recursive are not implemented yet)"
-        )
+        from planner.errors import InputError
+
+        raise InputError(f"planner: unknown '{planner}'; available: {', '.join(PLANNERS)}")
     robot = load_robot(robot) if isinstance(robot, str) else robot
     terrain = load_terrain(terrain) if isinstance(terrain, str) else terrain
-    local = SoftPlanner(robot, terrain, settings=settings)
+    local = PLANNERS[planner](robot, terrain, settings=settings)
     result = local.plan(start_xy, goal_xy, progress=progress)
     start = np.array(
         [*start_xy[:2], float(terrain.height(np.array(start_xy[0]), np.array(start_xy[1])))]

@@ -59,9 +59,9 @@ def test_failed_step_is_retried_from_the_queue(flat_planner, monkeypatch):
     real_swing = planner.swing
     failed = {"FL": False}
 
-    def swing(state, leg, tau, step_m):
+    def swing(state, leg, tau, step_m, target=None):
         attempts.append(leg)
-        sol, path = real_swing(state, leg, tau, step_m)
+        sol, path = real_swing(state, leg, tau, step_m, target)
         if leg == 0 and not failed["FL"]:  # force the first FL placement to fail
             failed["FL"] = True
             sol.feasible = False

@@ -399,6 +399,7 @@ class ThetaProblem:
             " support or the slope too steep",
             "foot_on_terrain": ": the swing foot cannot reach the terrain",
             "slope": ": every reachable foothold is steeper than atan(mu)",
+            "swing_ready": ": the swinging leg's next foothold is out of its reach from here",
         }
         for key, text in hints.items():
             if group.startswith(key):

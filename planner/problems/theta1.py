@@ -44,7 +44,7 @@ class Theta1(Theta2):
                 return False, f"leg {i + 1}: eq. 5 force outside the friction cone"
         return True, ""
 
-    def solve(self, start: State, rc_star_W, u_f, u_n) -> ThetaSolution:
+    def solve(self, start: State, rc_star_W, u_f, u_n, swing_target_W=None) -> ThetaSolution:
         """Theta1(r_c*, tau, r_1*..r_4*, i_f) of eq. 7, warm-started at ``start``."""
         if self.options.forces:
             ok, why = self.force_precheck(start, rc_star_W)
@@ -63,6 +63,6 @@ class Theta1(Theta2):
                     violations={"forces": float("inf")},
                 )
         t0 = time.perf_counter()
-        sol = super().solve(start, rc_star_W, u_f, u_n)
+        sol = super().solve(start, rc_star_W, u_f, u_n, swing_target_W)
         sol.solve_time_s = time.perf_counter() - t0
         return sol

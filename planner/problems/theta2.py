@@ -15,6 +15,12 @@ the terrain, (c) joint limits, (d) F_i.n_i > 0 and (e) friction cones for the eq
 of the weight-carrying feet (switchable). Objective: sigma1 (forward axis along u_f),
 sigma2 (up axis along u_n), sigma3 (joints near theta_nor), sigma4 (COM near r_c*),
 sigma5 (forces inside the cones), combined as a weighted sum of logs (see base).
+
+Beyond the paper, with three supporting legs the body move can be made *swing-ready*: the
+hip centre of the leg about to swing must lie within ``SWING_REACH_FRACTION`` of its reach
+of the sphere centre at the foothold it will be placed at (parameter ``swing_target_W``).
+Without it the body drifts to where the COM target wants it and leaves a lagging leg
+unable to reach its next foothold (the planner then stalls on steps and slopes).
 """
 
 from __future__ import annotations
@@ -23,6 +29,7 @@ import casadi as ca
 import numpy as np
 
 from planner import statics
+from planner.kinematics import hip_centre_B
 from planner.lie import coords_from_pose
 from planner.problems.base import (
     ThetaOptions,
@@ -34,6 +41,9 @@ from planner.problems.base import (
     state_from_pose_coords,
 )
 from planner.state import S0, State
+
+SWING_REACH_FRACTION = 0.92  # swing-ready: hip within this fraction of reach of the target
+NO_SWING_TARGET_M = 1e3  # reach bound that switches the swing-ready constraint off
 
 
 class Theta2(ThetaProblem):
@@ -69,6 +79,16 @@ class Theta2(ThetaProblem):
         com = com_W_ca(self, pos, R, th)
         if self.fix_com:
             self.constrain("com", com - rc)
+        if len(self.support) == 3:
+            (leg,) = set(range(4)) - set(self.support)
+            lg = r.legs[leg]
+            hip_B = hip_centre_B(lg)
+            hip_B = lg.points_B[0] if hip_B is None else hip_B
+            hip_W = ca.mtimes(R, ca.DM(hip_B)) + pos
+            target = self.par("swing_target_W", 3)
+            reach = self.par("swing_reach_m", 1)
+            d = hip_W - target
+            self.constrain("swing_ready", ca.dot(d, d) - reach**2, -np.inf, 0.0)
         if o.forces and not self.fix_com:
             feet_cols = ca.reshape(feet, 3, 4)
             normal_cols = ca.reshape(normals, 3, 4)
@@ -126,15 +146,29 @@ class Theta2(ThetaProblem):
         return centroid, np.linalg.inv(S)
 
     # ---- solving -------------------------------------------------------------------------
-    def params(self, start: State, rc_star_W, u_f, u_n) -> np.ndarray:
-        """Parameter vector for footholds of ``start``, target r_c*, directions u_f, u_n."""
+    def params(self, start: State, rc_star_W, u_f, u_n, swing_target_W=None) -> np.ndarray:
+        """Parameter vector for footholds of ``start``, target r_c*, directions u_f, u_n.
+
+        ``swing_target_W``: the contact point the swinging leg will be placed at (three
+        supporting legs only); None switches the swing-ready constraint off.
+        """
         from planner.contact import foot_centre_from_contact
 
         centres = foot_centre_from_contact(self.terrain, start.feet_W, self.robot.foot_radius_m)
         values = {}
+        if "swing_target_W" in self._p_slices:
+            (leg,) = set(range(4)) - set(self.support)
+            if swing_target_W is None:
+                target, reach = start.base_position_W, NO_SWING_TARGET_M
+            else:
+                target = foot_centre_from_contact(
+                    self.terrain, np.asarray(swing_target_W, float), self.robot.foot_radius_m
+                )
+                reach = SWING_REACH_FRACTION * float(self.robot.reach_m[leg])
+            values |= {"swing_target_W": target, "swing_reach_m": [reach]}
         if "support_S_inv" in self._p_slices:
             centroid, s_inv = self.support_geometry(start.feet_W)
-            values = {"support_centroid": centroid, "support_S_inv": s_inv.T.ravel()}
+            values |= {"support_centroid": centroid, "support_S_inv": s_inv.T.ravel()}
         return self.pack_params(
             values
             | {
@@ -165,9 +199,13 @@ class Theta2(ThetaProblem):
             x.append([0.5])
         return np.concatenate([np.asarray(v, float).ravel() for v in x])
 
-    def solve(self, start: State, rc_star_W, u_f, u_n) -> ThetaSolution:
-        """Theta2(r_c*, tau, r_1*..r_4*, i_f) of eq. 8, warm-started at ``start``."""
-        p = self.params(start, rc_star_W, u_f, u_n)
+    def solve(self, start: State, rc_star_W, u_f, u_n, swing_target_W=None) -> ThetaSolution:
+        """Theta2(r_c*, tau, r_1*..r_4*, i_f) of eq. 8, warm-started at ``start``.
+
+        ``swing_target_W`` (optional, three supporting legs): the next foothold of the leg
+        that will swing; the body then keeps that leg's hip within reach of it.
+        """
+        p = self.params(start, rc_star_W, u_f, u_n, swing_target_W)
         sol = self.solve_packed(p, self.initial_guess(start, p))
         sol.state.info["rc_star"] = np.asarray(rc_star_W, float)
         return sol
@@ -188,6 +226,14 @@ class Theta2(ThetaProblem):
             "clearance": ck.clearance(state),
             "orientation": ck.orientation(state),
         }
+        if "swing_target_W" in self._p_slices:
+            (leg,) = set(range(4)) - set(self.support)
+            lg = self.robot.legs[leg]
+            hip_B = hip_centre_B(lg)
+            hip_B = lg.points_B[0] if hip_B is None else hip_B
+            hip_W = state.base_rotation_W @ hip_B + state.base_position_W
+            d = float(np.linalg.norm(hip_W - p[self._p_slices["swing_target_W"]]))
+            v["swing_ready"] = max(d - float(p[self._p_slices["swing_reach_m"]][0]), 0.0)
         if self.fix_com:
             rc = p[self._p_slices["rc_star"]]
             v["com"] = float(np.linalg.norm(ck.com_W(state) - rc))

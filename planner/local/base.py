@@ -1,0 +1,505 @@
+"""What every local planner of section 8 shares (8.1, 8.2, 8.5).
+
+A *step* (section 8.5's word) is the cycle of figure 6 for one leg i_f: move the body on
+the current leaf of S0 onto the three other legs (Theta1 or Theta2), lift i_f, swing it
+clear of the terrain and place it with Theta3 (S0 -> S_if -> S0). :class:`LocalPlanner`
+builds and caches the Theta problems, makes steps (:meth:`LocalPlanner.step`) and records
+them in a :class:`Walk` (keyframes and dense samples). The planners differ only in how
+they choose the next step and what they do when one fails (:meth:`LocalPlanner._run`).
+
+Planning stops when the centre of mass is within ``goal_tol_m`` of the goal, when the
+step, cycle or time budget runs out, on Ctrl-C, or when the planner is stuck; whatever was
+planned is kept and returned.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from planner.heuristics import (
+    foothold_hazard,
+    lambda_c,
+    lambda_t,
+    nominal_height_m,
+    reference_directions,
+    safe_foothold,
+)
+from planner.interpolate import default_clearance_m, interpolate_leaf, interpolate_swing
+from planner.kinematics import kinematics_of
+from planner.local.gait_queue import CRAWL
+from planner.problems import Theta2, Theta3, Theta4, ThetaOptions
+from planner.problems.base import ConstraintCheck
+from planner.robot import LEG_NAMES
+from planner.state import State
+from planner.trajectory import Trajectory
+
+
+@dataclass
+class LocalSettings:
+    """What the local planner trades off.
+
+    step_m : stride of Lambda_t; default 0.35 x leg reach (6.3 cm for LittleDog).
+    shrink : Lambda_c's pull from the support centroid toward its incentre (stability
+        margin before a leg lifts); 0 is the paper.
+    body_speed_m_s, swing_time_s : timing of the samples (quasi-static: slow).
+    goal_tol_m : distance of the COM (xy) to the goal that counts as arrived.
+    balance_margin_frac : least friction-cone margin (x m g) at every sample of a path.
+    max_fails_in_row : failed step attempts in a row after which the planner is stuck.
+    """
+
+    gait: tuple[int, ...] = CRAWL
+    step_m: float | None = None
+    shrink: float = 0.3
+    clearance_m: float | None = None
+    body_samples: int = 8
+    swing_samples: int = 12
+    body_speed_m_s: float = 0.04
+    swing_time_s: float = 0.6
+    goal_tol_m: float = 0.05
+    max_cycles: int = 400
+    time_budget_s: float = 120.0
+    min_step_fraction: float = 0.25
+    max_fails_in_row: int = 8
+    balance_margin_frac: float = 0.01
+    theta: ThetaOptions = field(default_factory=ThetaOptions)
+
+
+@dataclass
+class LocalPlan:
+    """What a local planner produced: key configurations, dense samples, outcome."""
+
+    keyframes: list[State]
+    samples: list[State]
+    times: list[float]
+    reached_goal: bool
+    distance_to_goal_m: float
+    message: str
+    stats: dict
+
+
+@dataclass
+class Step:
+    """The outcome of one step attempt for ``leg`` from ``start``.
+
+    ``moved``: the state after the body move (None if it failed); ``end``: after the
+    placement, back on S0 (None if the step failed). ``phase`` names the failed part
+    ("body_move" or "foot_placement"), ``diagnosis`` says why.
+    """
+
+    leg: int
+    ok: bool
+    start: State
+    moved: State | None
+    end: State | None
+    body_path: list[State]
+    swing_path: list[State]
+    phase: str = ""
+    diagnosis: str = ""
+
+
+@dataclass
+class _Run:
+    """The fixed inputs and counters of one planning run."""
+
+    goal: np.ndarray
+    tau: Trajectory
+    t_begin: float
+    progress: object = None
+    cycles: int = 0
+    last_failure: str = ""
+
+
+class Walk:
+    """Keyframes and timed dense samples of a walk being planned; can be rewound."""
+
+    def __init__(self, planner: LocalPlanner, state: State):
+        self.planner = planner
+        self.keyframes: list[State] = [state]
+        self.samples: list[State] = [state]
+        self.times: list[float] = [0.0]
+        self.steps = 0
+
+    @property
+    def state(self) -> State:
+        """The current configuration (the last keyframe)."""
+        return self.keyframes[-1]
+
+    def add(self, step: Step) -> None:
+        """Record a step: its body move (also of a failed placement) and its swing."""
+        p = self.planner
+        if step.moved is None:
+            return
+        p._append(self.samples, self.times, step.body_path, p._body_time(step.start, step.moved))
+        self.keyframes.append(step.moved)
+        if step.ok:
+            p._append(self.samples, self.times, step.swing_path, p.settings.swing_time_s)
+            self.keyframes += [p._swing_keyframe(step.swing_path, step.leg, p.check), step.end]
+            self.steps += 1
+
+    def mark(self) -> tuple[int, int, int]:
+        """A bookmark for :meth:`rewind`."""
+        return len(self.keyframes), len(self.samples), self.steps
+
+    def rewind(self, mark: tuple[int, int, int]) -> None:
+        """Forget everything recorded after ``mark`` (backtracking, section 8.5)."""
+        k, s, n = mark
+        del self.keyframes[k:], self.samples[s:], self.times[s:]
+        self.steps = n
+
+
+class LocalPlanner:
+    """The shared part of the local planners, for one robot on one terrain.
+
+    Theta problems are built once per support pattern or swing leg and cached; initial
+    placement is Theta4 (7.5); :meth:`step` makes one step; subclasses implement
+    :meth:`_run`, the loop that chooses steps.
+    """
+
+    name = "local"
+
+    def __init__(self, robot, terrain, mu: float | None = None, settings=None):
+        self.robot = robot
+        self.terrain = terrain
+        self.mu = float(terrain.spec.get("friction", 0.7) if mu is None else mu)
+        self.settings = settings or LocalSettings()
+        self.kin = kinematics_of(robot)
+        self._theta2: dict[tuple[int, ...], Theta2] = {}
+        self._theta3: dict[int, Theta3] = {}
+        self.stats = {"theta2": [0, 0], "theta3": [0, 0], "theta4": [0, 0], "swing_ik": [0, 0]}
+        self.failures: list[dict] = []  # every failed step attempt, for the plan's stats
+        self.extra_stats: dict = {}
+        self.check = ConstraintCheck(robot, terrain, self.settings.theta)
+
+    # ---- problems, built once per support pattern / leg --------------------------------
+    def theta2(self, support) -> Theta2:
+        """Theta2 for a support pattern (built on first use)."""
+        key = tuple(sorted(support))
+        if key not in self._theta2:
+            self._theta2[key] = Theta2(
+                self.robot, self.terrain, support=key, options=self.settings.theta, mu=self.mu
+            )
+        return self._theta2[key]
+
+    def theta3(self, leg: int) -> Theta3:
+        """Theta3 for a swing leg (built on first use)."""
+        if leg not in self._theta3:
+            self._theta3[leg] = Theta3(
+                self.robot, self.terrain, leg, options=self.settings.theta, mu=self.mu
+            )
+        return self._theta3[leg]
+
+    def _count(self, key: str, ok: bool) -> None:
+        self.stats[key][0] += 1
+        self.stats[key][1] += int(ok)
+
+    def com_height_m(self) -> float:
+        """Nominal height of the whole-body COM above the terrain [m]."""
+        com_B = self.kin.com_B(self.robot.theta_nor, self.settings.theta.whole_body_com)
+        return nominal_height_m(self.robot) + float(com_B[2])
+
+    # ---- initial placement (section 7.5) -----------------------------------------------
+    def initial_state(self, start_xy, tau: Trajectory) -> State:
+        """Theta4 at the start: body origin at the nominal height above the terrain."""
+        x, y = float(start_xy[0]), float(start_xy[1])
+        z = float(self.terrain.height(np.array(x), np.array(y))) + nominal_height_m(self.robot)
+        p = np.array([x, y, z])
+        u_f, u_n = reference_directions(tau, self.terrain, p, lam=tau.lambda_a)
+        sol = Theta4(self.robot, self.terrain, self.settings.theta, self.mu).solve(p, u_f, u_n)
+        self._count("theta4", sol.feasible)
+        if not sol.feasible:
+            from planner.errors import NoSolutionFound
+
+            raise NoSolutionFound(
+                f"initial placement at ({x:.3f}, {y:.3f}) failed: {sol.diagnosis}", sol
+            )
+        return sol.state
+
+    # ---- one cycle ---------------------------------------------------------------------
+    def foothold_target(
+        self, state: State, leg: int, tau: Trajectory, step_m: float, shrink: float | None = None
+    ):
+        """Where ``leg`` will go: Lambda_t (eq. 13) moved off edges; returns (point, hazard).
+
+        Lambda_t is taken with the body at r_c* (where the body move will bring it), so
+        the foothold matches the stance the leg swings from; :func:`safe_foothold` then
+        moves it to the nearest point of the sharp terrain without an edge under the foot
+        (beyond the paper). ``hazard`` is "" or why no safe point was found nearby.
+        """
+        rc = self.body_target(state, leg, shrink)
+        ahead = state.copy()
+        ahead.base_position_W = np.array(rc, float)
+        target = lambda_t(self.robot, self.terrain, ahead, leg, tau, step_m=step_m)
+        u_f, _ = reference_directions(tau, self.terrain, target)
+        return safe_foothold(
+            self.terrain,
+            target,
+            u_f,
+            self.robot.foot_radius_m,
+            self.mu,
+            max_shift_m=max(step_m, 0.02),
+        )
+
+    def body_target(self, state: State, leg: int, shrink: float | None = None) -> np.ndarray:
+        """r_c* = Lambda_c(Psi, i_f) (eq. 12) at the nominal COM height, with ``shrink``."""
+        k = self.settings.shrink if shrink is None else shrink
+        return lambda_c(self.robot, self.terrain, state, leg, d_c_m=self.com_height_m(), shrink=k)
+
+    def body_move(
+        self,
+        state: State,
+        leg: int,
+        tau: Trajectory,
+        swing_target_W=None,
+        shrink: float | None = None,
+    ):
+        """Theta2 onto the three legs other than ``leg``; returns (solution, samples).
+
+        With ``swing_target_W`` the body also keeps ``leg``'s hip within reach of its next
+        foothold (Theta2's swing-ready constraint).
+        """
+        support = tuple(i for i in range(4) if i != leg)
+        rc = self.body_target(state, leg, shrink)
+        u_f, u_n = reference_directions(tau, self.terrain, rc)
+        sol = self.theta2(support).solve(state, rc, u_f, u_n, swing_target_W)
+        self._count("theta2", sol.feasible)
+        if not sol.feasible:
+            return sol, []
+        sol.state.support = support
+        path = interpolate_leaf(
+            self.robot, self.terrain, state, sol.state, self.settings.body_samples
+        )
+        why = self.path_problem(path)
+        if why:
+            sol.feasible = False
+            sol.diagnosis = f"body move onto three legs: {why}"
+            return sol, []
+        return sol, path
+
+    def swing(self, state: State, leg: int, tau: Trajectory, step_m: float, target_W=None):
+        """Theta3 for ``leg`` toward ``target_W`` (default Lambda_t); returns (solution, samples).
+
+        A swing path that leaves the leg's reach is retried once with half the clearance.
+        """
+        if target_W is None:
+            target_W = lambda_t(self.robot, self.terrain, state, leg, tau, step_m=step_m)
+        lifted = state.copy()
+        lifted.stratum = leg + 1
+        sol = self.theta3(leg).solve(lifted, target_W)
+        self._count("theta3", sol.feasible)
+        if not sol.feasible:
+            return sol, []
+        touch = sol.state
+        touch.support = tuple(range(4))
+        hazard = foothold_hazard(self.terrain, touch.feet_W[leg], self.robot.foot_radius_m, self.mu)
+        if hazard:
+            sol.feasible = False
+            sol.diagnosis = f"foothold of {LEG_NAMES[leg]} has {hazard}"
+            return sol, []
+        clearance = self.settings.clearance_m or default_clearance_m(self.robot)
+        for clr in (clearance, 0.5 * clearance):
+            path = interpolate_swing(
+                self.robot,
+                self.terrain,
+                lifted,
+                touch,
+                self.settings.swing_samples,
+                clr,
+                swing_leg=leg,
+            )
+            why = self.path_problem(path)
+            self._count("swing_ik", not why)
+            if not why:
+                return sol, path
+            if "balance" in why:  # a lower swing does not move the COM less
+                break
+        sol.feasible = False
+        sol.diagnosis = f"swing of {LEG_NAMES[leg]}: {why}"
+        return sol, []
+
+    def path_problem(self, path: list[State]) -> str:
+        """Why a sampled leaf path is not executable, or "": reach and balance per sample.
+
+        Keyframes are feasible by construction, the samples between them are not: a leg
+        can run out of reach mid-way, and the COM moves (the body along eq. 6b, the swing
+        leg's own mass) so that it can leave the support. Every sample is checked with IK
+        and the exact friction-cone test (:func:`planner.statics.static_feasibility`),
+        with a margin of ``settings.balance_margin_frac`` x m g.
+        """
+        from planner.statics import static_feasibility
+
+        mg = self.robot.total_mass_kg * 9.81
+        need = self.settings.balance_margin_frac * mg
+        for k, s in enumerate(path):
+            if not s.info.get("ik_ok", True):
+                legs = ", ".join(LEG_NAMES[i] for i in s.info.get("unreachable_legs", []))
+                return f"sample {k} of the path leaves the reach of {legs or 'a leg'}"
+        for k, s in enumerate(path[1:-1], start=1):
+            sup = np.flatnonzero(s.in_contact)
+            normals = self.terrain.normal(s.feet_W)
+            res = static_feasibility(
+                s.feet_W,
+                self.check.com_W(s),
+                self.robot.total_mass_kg,
+                sup,
+                self.mu,
+                normals,
+                with_com_margin=False,
+            )
+            if res.margin_N < need:
+                return (
+                    f"balance lost at sample {k} of the path (friction-cone margin "
+                    f"{res.margin_N:.2f} N < {need:.2f} N): the COM leaves the support"
+                )
+        return ""
+
+    def stride_m(self) -> float:
+        """Stride of Lambda_t [m]: ``settings.step_m`` or 0.35 x the shortest leg reach."""
+        st = self.settings
+        return st.step_m if st.step_m is not None else 0.35 * float(np.min(self.robot.reach_m))
+
+    def step(
+        self, state: State, leg: int, tau: Trajectory, step_m: float, shrink: float | None = None
+    ) -> Step:
+        """One step of ``leg`` from ``state``: body move (swing-ready), swing, placement.
+
+        The body move is first asked to keep ``leg`` within reach of its next foothold
+        (Theta2's swing-ready constraint); if that is infeasible, the paper's plain Theta2.
+        A failed placement keeps the body move (``Step.moved``): the robot stands safely on
+        three legs there. ``shrink`` overrides ``settings.shrink`` of Lambda_c.
+        """
+        target, _ = self.foothold_target(state, leg, tau, step_m, shrink)
+        sol2, body_path = self.body_move(state, leg, tau, target, shrink)
+        if not sol2.feasible:
+            sol2, body_path = self.body_move(state, leg, tau, None, shrink)
+        if not sol2.feasible:
+            return Step(leg, False, state, None, None, [], [], "body_move", sol2.diagnosis)
+        moved = sol2.state
+        sol3, swing_path = self.swing(moved, leg, tau, step_m, target)
+        if not sol3.feasible:
+            return Step(
+                leg, False, state, moved, None, body_path, [], "foot_placement", sol3.diagnosis
+            )
+        return Step(leg, True, state, moved, sol3.state, body_path, swing_path)
+
+    # ---- the loop ----------------------------------------------------------------------
+    def plan(
+        self,
+        start_xy,
+        goal_xy,
+        tau: Trajectory | None = None,
+        progress=None,
+        start_state: State | None = None,
+    ) -> LocalPlan:
+        """Plan from ``start_xy`` (or ``start_state``) until the COM is at ``goal_xy``.
+
+        ``progress(distance_m, steps)`` is called after each step. Ctrl-C stops planning
+        and returns the plan so far (its message says so).
+        """
+        t_begin = time.perf_counter()
+        if tau is None:
+            tau = Trajectory.straight(start_xy, goal_xy, self.terrain, self.com_height_m())
+        state = start_state if start_state is not None else self.initial_state(start_xy, tau)
+        self.check = ConstraintCheck(self.robot, self.terrain, self.settings.theta)
+        run = _Run(np.asarray(goal_xy, float)[:2], tau, t_begin, progress)
+        walk = Walk(self, state)
+        try:
+            message = self._run(walk, run)
+        except KeyboardInterrupt:
+            message = f"interrupted (Ctrl-C) after {walk.steps} steps; the plan so far is kept"
+        dist = self.distance_to_goal(walk.state, run)
+        stats = {
+            "planner": self.name,
+            "cycles": run.cycles,
+            "steps": walk.steps,
+            "planning_time_s": time.perf_counter() - t_begin,
+            "solves": {k: {"count": v[0], "feasible": v[1]} for k, v in self.stats.items()},
+            "failures": self.failures[-50:],
+        } | self.extra_stats
+        return LocalPlan(
+            keyframes=walk.keyframes,
+            samples=walk.samples,
+            times=walk.times,
+            reached_goal=dist <= self.settings.goal_tol_m,
+            distance_to_goal_m=dist,
+            message=message,
+            stats=stats,
+        )
+
+    def _run(self, walk: Walk, run: _Run) -> str:  # pragma: no cover - abstract
+        """Choose and record steps until done; return the reason planning stopped."""
+        raise NotImplementedError
+
+    def distance_to_goal(self, state: State, run: _Run) -> float:
+        """Horizontal distance of the whole-body COM to the goal [m]."""
+        return float(np.linalg.norm(self.check.com_W(state)[:2] - run.goal))
+
+    def stop_reason(self, walk: Walk, run: _Run, fails_in_row: int = 0) -> str:
+        """Why planning must stop now ("" to go on): goal, cycles, time budget, stuck."""
+        st = self.settings
+        dist = self.distance_to_goal(walk.state, run)
+        if dist <= st.goal_tol_m:
+            return f"reached the goal: COM {dist * 100:.1f} cm from it"
+        if run.cycles >= st.max_cycles:
+            return f"stopped after {run.cycles} cycles (max_cycles)"
+        if time.perf_counter() - run.t_begin > st.time_budget_s:
+            return f"stopped by the time budget ({st.time_budget_s:.0f} s)"
+        if fails_in_row >= st.max_fails_in_row:
+            return f"stuck: {fails_in_row} failed step attempts in a row; last: {run.last_failure}"
+        return ""
+
+    def failed(self, run: _Run, step: Step) -> None:
+        """Log a failed step (kept in the plan's stats)."""
+        phase = "body move" if step.phase == "body_move" else "foot placement"
+        run.last_failure = f"{LEG_NAMES[step.leg]} {phase}: {step.diagnosis}"
+        where = step.moved if step.moved is not None else step.start
+        self._log_failure(run.cycles, step.leg, step.phase, where, step.diagnosis)
+
+    def report(self, walk: Walk, run: _Run) -> None:
+        """Call the progress callback."""
+        if run.progress is not None:
+            run.progress(self.distance_to_goal(walk.state, run), walk.steps)
+
+    def _log_failure(self, cycle: int, leg: int, phase: str, state: State, why: str) -> None:
+        self.failures.append(
+            {
+                "cycle": cycle,
+                "leg": LEG_NAMES[leg],
+                "phase": phase,
+                "base_xy": np.round(state.base_position_W[:2], 3).tolist(),
+                "why": why,
+            }
+        )
+
+    def _swing_keyframe(self, path: list[State], leg: int, check) -> State:
+        """The mid-swing configuration on S_leg, with its eq. 5 forces (3 stance feet)."""
+        from planner.statics import equilibrating_forces
+
+        mid = path[len(path) // 2].copy()
+        mid.stratum = leg + 1
+        mid.support = tuple(i for i in range(4) if i != leg)
+        eq = equilibrating_forces(
+            mid.feet_W, check.com_W(mid), self.robot.total_mass_kg, mid.support
+        )
+        mid.forces_W = None if eq.degenerate else eq.forces
+        return mid
+
+    def _body_time(self, a: State, b: State) -> float:
+        d = float(np.linalg.norm(b.base_position_W - a.base_position_W))
+        return max(d / self.settings.body_speed_m_s, 0.2)
+
+    @staticmethod
+    def _append(samples: list, times: list, path: list, duration_s: float) -> None:
+        """Append a path's samples after the first (equal to the last sample) with times."""
+        if len(path) < 2:
+            return
+        t0 = times[-1]
+        k = len(path) - 1
+        for j, s in enumerate(path[1:], start=1):
+            samples.append(s)
+            times.append(t0 + duration_s * j / k)
+
+
+__all__ = ["LocalPlan", "LocalPlanner", "LocalSettings", "Step", "Walk"]

@@ -1,0 +1,133 @@
+"""Local planning by recursion with backtracking (paper section 8.5, eq. 14).
+
+The paper outlines, but never implemented, [Psi_f, e] = F(Psi_i, Q, n, rho): from Psi_i,
+with the gait step queue Q, make n steps, trying ambitious moves first; when a step
+cannot be made, go back as far as needed and try the earlier steps differently. Here:
+
+- a *move* is one step (:meth:`planner.local.base.LocalPlanner.step`) of a leg with an
+  ambition rho = (rho_2, rho_3): rho_3 scales the stride of Lambda_t (how far the foot
+  goes), rho_2 is Lambda_c's shrink toward the support's incentre (how cautious the body
+  move is). :data:`AMBITIONS` lists them most ambitious first;
+- F tries, for the leg at the front of Q and then the next one (the queue's swap), each
+  ambition in turn; a feasible step recurses with n - 1 and the leg pushed to the back;
+  when the recursion fails, the step is undone (the walk is rewound) and the next option
+  tried: this is the tracing back of 8.5;
+- the walk is planned in windows of ``lookahead`` steps (receding horizon). Each window
+  has a budget of step attempts (``node_budget``), and the whole run the time budget of
+  the settings, so F always returns. A window that fails within its budget commits the
+  deepest sequence of steps it found; none at all means the robot is stuck.
+
+Where it beats 8.2: the soft planner commits every step greedily and, when a leg then
+cannot step, only swaps legs and shortens that one leg's stride; the recursive planner
+also undoes the steps that led there (for instance a long stride of the leg before) and
+tries them shorter or with a more cautious body move.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+from planner.local.base import LocalPlanner, Step, Walk, _Run
+
+AMBITIONS = ((1.0, None), (0.6, None), (0.3, 0.6))  # (rho_3 stride fraction, rho_2 shrink)
+
+
+@dataclass
+class RecursiveSettings:
+    """Budgets of F: steps per window, step attempts per window, legs tried per level."""
+
+    lookahead: int = 3
+    node_budget: int = 24
+    legs_per_level: int = 2
+    ambitions: tuple = AMBITIONS
+
+
+class _Budget(Exception):
+    """A window ran out of step attempts or the run out of time."""
+
+
+@dataclass
+class _Window:
+    attempts: int = 0
+    best: list[Step] = field(default_factory=list)
+    best_queue: tuple[int, ...] = ()
+    backtracks: int = 0
+
+
+class RecursivePlanner(LocalPlanner):
+    """F(Psi, Q, n, rho) of section 8.5 in receding windows."""
+
+    name = "recursive"
+
+    def __init__(self, robot, terrain, mu=None, settings=None, recursion=None):
+        super().__init__(robot, terrain, mu, settings)
+        self.recursion = recursion or RecursiveSettings()
+        self.extra_stats = {"backtracks": 0, "windows": 0, "partial_windows": 0}
+
+    def F(self, walk: Walk, queue: tuple[int, ...], n: int, run: _Run, win: _Window, path):
+        """Make ``n`` steps from ``walk.state``; returns the queue after them, or None.
+
+        ``path`` holds the steps made so far in this window (for the best partial result).
+        """
+        if n == 0 or self.distance_to_goal(walk.state, run) <= self.settings.goal_tol_m:
+            return queue
+        rs = self.recursion
+        for j in range(min(rs.legs_per_level, len(queue))):
+            leg = queue[j]
+            rest = queue[:j] + queue[j + 1 :] + (leg,)
+            for rho3, rho2 in rs.ambitions:
+                if win.attempts >= rs.node_budget:
+                    raise _Budget
+                if time.perf_counter() - run.t_begin > self.settings.time_budget_s:
+                    raise _Budget
+                win.attempts += 1
+                run.cycles += 1
+                step = self.step(walk.state, leg, run.tau, self.stride_m() * rho3, rho2)
+                if not step.ok:
+                    self.failed(run, step)
+                    continue
+                mark = walk.mark()
+                walk.add(step)
+                path.append(step)
+                if len(path) > len(win.best):
+                    win.best, win.best_queue = list(path), rest
+                out = self.F(walk, rest, n - 1, run, win, path)
+                if out is not None:
+                    return out
+                path.pop()
+                walk.rewind(mark)  # trace back (8.5): undo the step, try the next option
+                win.backtracks += 1
+        return None
+
+    def _run(self, walk: Walk, run: _Run) -> str:
+        queue = tuple(self.settings.gait)
+        while not (message := self.stop_reason(walk, run)):
+            self.extra_stats["windows"] += 1
+            win = _Window()
+            root = walk.mark()
+            try:
+                out = self.F(walk, queue, self.recursion.lookahead, run, win, [])
+            except _Budget:
+                out = None
+            self.extra_stats["backtracks"] += win.backtracks
+            if out is not None:
+                queue = out
+                self.report(walk, run)
+                continue
+            # no full window: commit the deepest sequence found, if any
+            walk.rewind(root)
+            if not win.best:
+                return (
+                    f"stuck: no step possible from here with any leg or ambition; last: "
+                    f"{run.last_failure}"
+                )
+            self.extra_stats["partial_windows"] += 1
+            for step in win.best:
+                walk.add(step)
+            queue = win.best_queue
+            self.report(walk, run)
+        return message
+
+
+__all__ = ["AMBITIONS", "RecursivePlanner", "RecursiveSettings"]
