@@ -89,7 +89,7 @@ def _parse_xy(text: str, field: str) -> tuple[float, float]:
 def _cmd_plan(args) -> int:
     import time
 
-    from planner.local.soft import LocalSettings
+    from planner.local.base import LocalSettings
     from planner.walk import plan_walk
 
     settings = LocalSettings(time_budget_s=args.time_budget)
@@ -164,7 +164,12 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--terrain", required=True, help="terrain name or YAML path")
     pl.add_argument("--goal", required=True, help="X,Y [m]")
     pl.add_argument("--start", default="0.2,0", help="X,Y [m] (default 0.2,0)")
-    pl.add_argument("--planner", default="soft", choices=["soft"])
+    pl.add_argument(
+        "--planner",
+        default="soft",
+        choices=["soft", "hard", "recursive"],
+        help="soft: 8.2 gait queue (default); hard: 8.1 search Omega; recursive: 8.5",
+    )
     pl.add_argument("--time-budget", type=float, default=120.0, help="[s]")
     pl.add_argument("--out", default="plan.json")
     pl.set_defaults(func=_cmd_plan)

@@ -74,3 +74,98 @@ def test_failed_step_is_retried_from_the_queue(flat_planner, monkeypatch):
     planner.plan([0.2, 0.0], [1.0, 0.0])
     # crawl HL, FL (fails), then HR goes first and FL is retried right after it
     assert attempts[:4] == [2, 0, 3, 0]
+
+
+# ---- planners over real terrain, checked by the independent validator ----------------------
+def _checked(plan_and_report):
+    plan, report = plan_and_report
+    assert report.ok, report.summary() + "\n" + "\n".join(map(str, report.violations[:5]))
+    return plan
+
+
+def test_soft_plan_over_a_step_passes_check(littledog):
+    from planner.terrain import Terrain
+    from planner.walk import plan_walk
+
+    step = Terrain.from_spec(
+        {
+            "name": "step4cm",
+            "kind": "step",
+            "x": 0.42,
+            "height": 0.04,
+            "friction": 0.7,
+            "length": 1.5,
+        }
+    )
+    plan = _checked(plan_walk(littledog, step, (0.72, 0.0), (0.2, 0.0), "soft"))
+    assert plan.outcome["reached_goal"], plan.outcome["message"]
+    # every foot ends on top of the step, none on its edge
+    feet = np.array(plan.keyframes[-1].feet)
+    assert np.all(feet[:, 0] > 0.42 + 0.02) and np.allclose(feet[:, 2], 0.04, atol=1e-3)
+
+
+def test_hard_planner_walks_on_flat_ground(littledog):
+    from planner.walk import plan_walk
+
+    plan = _checked(plan_walk(littledog, "flat", (0.45, 0.0), (0.2, 0.0), "hard"))
+    assert plan.outcome["reached_goal"], plan.outcome["message"]
+    assert plan.stats["planner"] == "hard" and plan.stats["solves"]["theta1"]["feasible"] > 0
+
+
+def _dead_end_rule(planner):
+    """FL cannot step after a full-stride HL step: only tracing back gets past it."""
+    real = planner.step
+    last_hl = {"full": False}
+    full = planner.stride_m()
+
+    def step(state, leg, tau, step_m, shrink=None):
+        out = real(state, leg, tau, step_m, shrink)
+        if leg == 0 and last_hl["full"]:
+            out.ok, out.end, out.phase, out.diagnosis = False, None, "foot_placement", "dead end"
+            out.moved, out.body_path = None, []
+        if leg == 2 and out.ok:
+            last_hl["full"] = step_m >= full - 1e-12
+        return out
+
+    planner.step = step
+
+
+def test_recursive_planner_traces_back_where_soft_gets_stuck(littledog):
+    from planner.local.base import LocalSettings
+    from planner.local.recursive import RecursivePlanner
+
+    terrain = load_terrain("flat")
+    soft = SoftPlanner(littledog, terrain, settings=LocalSettings(max_cycles=24))
+    _dead_end_rule(soft)
+    stuck = soft.plan([0.2, 0.0], [0.45, 0.0])
+    assert not stuck.reached_goal
+
+    rec = RecursivePlanner(littledog, terrain)
+    _dead_end_rule(rec)
+    plan = rec.plan([0.2, 0.0], [0.45, 0.0])
+    assert plan.reached_goal, plan.message
+    assert plan.stats["backtracks"] >= 1
+    # the walk after tracing back is still one consistent path on the leaves
+    for a, b in zip(plan.samples[:-1], plan.samples[1:], strict=True):
+        both = a.in_contact & b.in_contact
+        assert np.allclose(a.feet_W[both], b.feet_W[both], atol=1e-9)
+
+
+def test_ctrl_c_keeps_the_plan_so_far(littledog, monkeypatch):
+    from planner.validate import check_plan
+    from planner.walk import plan_walk
+
+    calls = {"n": 0}
+    real = SoftPlanner.step
+
+    def step(self, *args, **kwargs):
+        calls["n"] += 1
+        if calls["n"] == 5:
+            raise KeyboardInterrupt
+        return real(self, *args, **kwargs)
+
+    monkeypatch.setattr(SoftPlanner, "step", step)
+    plan, report = plan_walk(littledog, "flat", (1.0, 0.0), (0.2, 0.0), "soft")
+    assert "interrupted (Ctrl-C) after 4 steps" in plan.outcome["message"]
+    assert not plan.outcome["reached_goal"] and plan.stats["steps"] == 4
+    assert report.ok and check_plan(plan).ok
