@@ -137,7 +137,10 @@ def lambda_c(
     under modelling errors (section 8.2.1's argument); ``shrink`` in [0, 1] moves r_c^+ that
     fraction of the way from the centroid toward the triangle's incentre (the point with
     the largest distance to the nearest edge, :func:`support_incentre_W`). 0 is the paper.
-    Step 2: lift to ``d_c_m`` above the terrain, r_c* = (x, y, height(x, y) + d_c).
+    Step 2: lift to ``d_c_m`` above the terrain, r_c* = (x, y, height(x, y) + d_c); where
+    the terrain under r_c^+ is lower than the support feet (a gap, a hole, a pit between
+    stones) the body would sink into it, so the height lifted from is the higher of
+    height(x, y) and the support centroid's z.
 
     Parameters
     ----------
@@ -167,6 +170,7 @@ def lambda_c(
     if shrink > 0.0:
         r = (1.0 - shrink) * r + shrink * support_incentre_W(state, i_f)
     z = float(np.asarray(terrain.height(r[0], r[1]), dtype=float))
+    z = max(z, float(support_centroid_W(state, i_f)[2]))  # over a gap: from the feet
     return np.array([r[0], r[1], z + d_c])
 
 
@@ -339,16 +343,23 @@ def safe_foothold(
     mu: float = 0.7,
     max_shift_m: float = 0.06,
     step_m: float = 0.01,
-    lateral_m: tuple[float, ...] = (0.0, 0.015, -0.015, 0.03, -0.03),
+    max_lateral_m: float = 0.06,
+    lateral_step_m: float = 0.015,
+    lateral_cost: float = 1.5,
+    not_behind_W: ArrayLike | None = None,
 ) -> tuple[np.ndarray, str]:
     """The foothold nearest ``target_W`` without a :func:`foothold_hazard` (beyond the paper).
 
     Lambda_t (eq. 13) knows nothing of edges; on steps, stairs, gaps and stones its target
     often lands on an edge, where Theta3 (which sees the smoothed terrain) either fails or
     puts the foot where the real, sharp terrain does not hold it. Candidates are the
-    target shifted along ``forward_W`` by 0, -s, +s, -2s, ... up to ``max_shift_m`` (back
-    first: a shorter stride is the cautious choice), then with lateral offsets. Returns
-    (point on the terrain, "") or (the original target, the hazard) when none is safe.
+    target shifted by ``d`` along ``forward_W`` (|d| <= ``max_shift_m``, every ``step_m``)
+    and ``l`` sideways (|l| <= ``max_lateral_m``, every ``lateral_step_m``), tried in the
+    order of ``|d| + lateral_cost |l|`` (a shorter stride before a longer one at equal
+    cost). With ``not_behind_W`` (the foot's current contact point), candidates that are
+    not ahead of it along ``forward_W`` are skipped: a lagging leg must not be sent back
+    in front of a gap it has to cross. Returns (point on the terrain, "") or (the original
+    target, the hazard) when none is safe.
     """
     t = np.asarray(target_W, float).reshape(3)
     f = np.asarray(forward_W, float).reshape(3).copy()
@@ -357,14 +368,21 @@ def safe_foothold(
     f = np.array([1.0, 0.0, 0.0]) if nf < 1e-9 else f / nf
     side = np.array([-f[1], f[0], 0.0])
     k = int(round(max_shift_m / step_m))
-    shifts = [0.0] + [s * j * step_m for j in range(1, k + 1) for s in (-1.0, 1.0)]
+    m = int(round(max_lateral_m / lateral_step_m))
+    cands = [
+        (abs(d) + lateral_cost * abs(lat), d > 0, d, lat)
+        for d in step_m * np.arange(-k, k + 1)
+        for lat in lateral_step_m * np.arange(-m, m + 1)
+    ]
+    cands.sort(key=lambda c: c[:2])
     first = ""
-    for lat in lateral_m:
-        for d in shifts:
-            c = t + d * f + lat * side
-            c[2] = float(np.asarray(terrain.height(c[0], c[1]), float))
-            why = foothold_hazard(terrain, c, radius_m, mu)
-            if not why:
-                return c, ""
-            first = first or why
+    for _, _, d, lat in cands:
+        c = t + d * f + lat * side
+        if not_behind_W is not None and float((c - np.asarray(not_behind_W, float)) @ f) <= 0:
+            continue
+        c[2] = float(np.asarray(terrain.height(c[0], c[1]), float))
+        why = foothold_hazard(terrain, c, radius_m, mu)
+        if not why:
+            return c, ""
+        first = first or why
     return t, first

@@ -145,6 +145,30 @@ class Robot:
             [[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
         )
 
+    def body_bottom_points_B(self, spacing_m: float = 0.02, rows: int = 3) -> np.ndarray:
+        """(K, 3) points of the bottom face of P, on ``rows`` lines along x, edges included.
+
+        Points are at most ``spacing_m`` apart along the lines. The vertices alone
+        (constraint (b) of section 7.2) let a thin obstacle, a barrier or a stone edge, pass
+        between them under the belly.
+        """
+        lo, hi = self.body_box_B
+        nx = max(2, int(np.ceil((hi[0] - lo[0]) / spacing_m)) + 1)
+        ny = max(2, int(rows))
+        gx, gy = np.meshgrid(np.linspace(lo[0], hi[0], nx), np.linspace(lo[1], hi[1], ny))
+        return np.column_stack([gx.ravel(), gy.ravel(), np.full(gx.size, lo[2])])
+
+    @property
+    def body_clearance_points_B(self) -> np.ndarray:
+        """Points of P kept delta_c above the terrain: its 8 vertices and bottom-face grid."""
+        pts = getattr(self, "_clearance_points_B", None)
+        if pts is None:
+            pts = np.unique(
+                np.vstack([self.body_vertices_B, self.body_bottom_points_B()]), axis=0
+            )
+            self._clearance_points_B = pts
+        return pts
+
     def q_from(self, base_position_W, base_quat_xyzw, joints_rad) -> np.ndarray:
         """Pinocchio configuration q (19,) from base pose and (4, 3) or (12,) joint angles."""
         q = np.zeros(self.model.nq)

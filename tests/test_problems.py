@@ -117,9 +117,21 @@ def test_theta3_places_a_foot(dog, name, x):
         others = [i for i in range(4) if i != leg]
         np.testing.assert_array_equal(sol.state.feet_W[others], start.feet_W[others])
         p = problem.pack_params(
-            {"p": start.base_position_W, "R": start.base_rotation_W.T.ravel(), "target_W": target}
+            {
+                "p": start.base_position_W,
+                "R": start.base_rotation_W.T.ravel(),
+                "target_W": target,
+                "target_radius_m": [1e3],
+            }
         )
         assert sol.objective <= problem.objective_at(problem.initial_guess(start), p) + 1e-9
+        # a hard target radius (beyond the paper) is met or reported
+        on = np.array([*target[:2], float(terrain.height(target[0], target[1]))])
+        tight = problem.solve(start, on, target_radius_m=0.005)
+        assert tight.feasible, tight.diagnosis
+        assert np.linalg.norm(tight.state.feet_W[leg] - on) <= 0.005 + 1e-9
+        far = problem.solve(start, start.feet_W[leg] + 0.3 * u_f, target_radius_m=0.005)
+        assert not far.feasible and "target_radius" in far.diagnosis
 
 
 def test_unreachable_foothold_is_reported(dog):

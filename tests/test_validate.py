@@ -29,7 +29,8 @@ def make_plan(dog, terrain_name, x, step_m):
     a = Theta4(dog, terrain).solve([x, 0.0, z], [1, 0, 0], [0, 0, 1]).state
     rc = a.feet_W[[1, 2, 3]].mean(axis=0) + [0.0, 0.0, 0.15]
     b = Theta2(dog, terrain, support=(1, 2, 3)).solve(a, rc, [1, 0, 0], [0, 0, 1]).state
-    placed = Theta3(dog, terrain, leg=0).solve(b, b.feet_W[0] + [step_m, 0.0, 0.0])
+    theta3 = Theta3(dog, terrain, leg=0)  # started at the current foot, not at the target
+    placed = theta3.solve(b, b.feet_W[0] + [step_m, 0.0, 0.0], x0=theta3.initial_guess(b))
     assert placed.feasible, placed.diagnosis
     c = placed.state
     samples = interpolate_leaf(dog, terrain, a, b, N) + interpolate_swing(dog, terrain, b, c, N)[1:]

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from planner.heuristics import (
+    EDGE_MARGIN_M,
     foothold_hazard,
     lambda_c,
     lambda_t,
@@ -35,6 +36,9 @@ from planner.problems.base import ConstraintCheck
 from planner.robot import LEG_NAMES
 from planner.state import State
 from planner.trajectory import Trajectory
+
+BODY_CLEARANCE_M = 0.005  # least height of the body's bottom above the sharp terrain [m]
+TARGET_RADIUS_M = 0.01  # a placed foot lands within this of its (edge-free) target [m]
 
 
 @dataclass
@@ -239,7 +243,8 @@ class LocalPlanner:
             u_f,
             self.robot.foot_radius_m,
             self.mu,
-            max_shift_m=max(step_m, 0.02),
+            max_shift_m=max(step_m, 0.5 * float(np.min(self.robot.reach_m))),
+            not_behind_W=state.feet_W[leg],
         )
 
     def body_target(self, state: State, leg: int, shrink: float | None = None) -> np.ndarray:
@@ -287,13 +292,20 @@ class LocalPlanner:
             target_W = lambda_t(self.robot, self.terrain, state, leg, tau, step_m=step_m)
         lifted = state.copy()
         lifted.stratum = leg + 1
-        sol = self.theta3(leg).solve(lifted, target_W)
+        sol = self.theta3(leg).solve(lifted, target_W, target_radius_m=TARGET_RADIUS_M)
         self._count("theta3", sol.feasible)
         if not sol.feasible:
             return sol, []
         touch = sol.state
         touch.support = tuple(range(4))
-        hazard = foothold_hazard(self.terrain, touch.feet_W[leg], self.robot.foot_radius_m, self.mu)
+        # the target keeps EDGE_MARGIN_M from edges, the foot lands within TARGET_RADIUS_M
+        hazard = foothold_hazard(
+            self.terrain,
+            touch.feet_W[leg],
+            self.robot.foot_radius_m,
+            self.mu,
+            EDGE_MARGIN_M - TARGET_RADIUS_M,
+        )
         if hazard:
             sol.feasible = False
             sol.diagnosis = f"foothold of {LEG_NAMES[leg]} has {hazard}"
@@ -323,7 +335,8 @@ class LocalPlanner:
         """Why a sampled leaf path is not executable, or "": reach and balance per sample.
 
         Keyframes are feasible by construction, the samples between them are not: a leg
-        can run out of reach mid-way, and the COM moves (the body along eq. 6b, the swing
+        can run out of reach mid-way, the body box can dip onto the sharp terrain (its
+        bottom face is checked on a 5 mm grid), and the COM moves (the body along eq. 6b, the swing
         leg's own mass) so that it can leave the support. Every sample is checked with IK
         and the exact friction-cone test (:func:`planner.statics.static_feasibility`),
         with a margin of ``settings.balance_margin_frac`` x m g.
@@ -336,6 +349,15 @@ class LocalPlanner:
             if not s.info.get("ik_ok", True):
                 legs = ", ".join(LEG_NAMES[i] for i in s.info.get("unreachable_legs", []))
                 return f"sample {k} of the path leaves the reach of {legs or 'a leg'}"
+        pts_B = self.robot.body_bottom_points_B(spacing_m=0.005, rows=5)
+        for k, s in enumerate(path):
+            pts = pts_B @ s.base_rotation_W.T + s.base_position_W
+            gap = pts[:, 2] - np.asarray(self.terrain.height_sharp(pts[:, 0], pts[:, 1]))
+            if float(gap.min()) < BODY_CLEARANCE_M:
+                return (
+                    f"the body passes {float(gap.min()) * 1000:.1f} mm above the terrain at "
+                    f"sample {k} of the path (less than {BODY_CLEARANCE_M * 1000:.0f} mm)"
+                )
         for k, s in enumerate(path[1:-1], start=1):
             sup = np.flatnonzero(s.in_contact)
             normals = self.terrain.normal(s.feet_W)

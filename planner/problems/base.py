@@ -145,7 +145,8 @@ class ConstraintCheck:
 
     def clearance(self, state: State) -> float:
         """delta_c - min over P of f_T [m], if positive (constraint b)."""
-        verts_W = self.robot.body_vertices_B @ state.base_rotation_W.T + state.base_position_W
+        pts_B = self.robot.body_clearance_points_B
+        verts_W = pts_B @ state.base_rotation_W.T + state.base_position_W
         f = self.terrain.f_T(verts_W)
         return float(max(np.max(self.options.clearance_m - f), 0.0))
 
@@ -253,11 +254,14 @@ class ThetaProblem:
     def constrain_body_pose(self, pos, R, phi, s1, s2, u_f, u_n) -> None:
         """Constraints (a), (b) of section 7.2 and the sigma1, sigma2 slack equalities.
 
-        (a) |theta omega| <= pi; (b) every vertex of the body box P at least delta_c above
-        the terrain; s1 = u_f . R e_x and s2 = u_n . R e_z (sigma1, sigma2 of 7.2).
+        (a) |theta omega| <= pi; (b) every vertex of the body box P, and points of its
+        bottom face every 2 cm (beyond the paper: a thin barrier fits between vertices),
+        at least delta_c above the terrain; s1 = u_f . R e_x and s2 = u_n . R e_z (sigma1,
+        sigma2 of 7.2).
         """
-        verts = ca.mtimes(R, ca.DM(self.robot.body_vertices_B.T)) + ca.repmat(pos, 1, 8)
-        clear = ca.vertcat(*[self.terrain.f_T_ca(verts[:, k]) for k in range(8)])
+        pts_B = self.robot.body_clearance_points_B
+        verts = ca.mtimes(R, ca.DM(pts_B.T)) + ca.repmat(pos, 1, len(pts_B))
+        clear = ca.vertcat(*[self.terrain.f_T_ca(verts[:, k]) for k in range(len(pts_B))])
         self.constrain("orientation", ca.dot(phi, phi), -np.inf, np.pi**2)
         self.constrain("clearance", clear, self.options.clearance_m, np.inf)
         self.constrain("sigma1", s1 - ca.dot(u_f, R[:, 0]))
@@ -399,6 +403,7 @@ class ThetaProblem:
             " support or the slope too steep",
             "foot_on_terrain": ": the swing foot cannot reach the terrain",
             "slope": ": every reachable foothold is steeper than atan(mu)",
+            "target_radius": ": no foothold within the target radius is reachable",
             "swing_ready": ": the swinging leg's next foothold is out of its reach from here",
         }
         for key, text in hints.items():

@@ -28,6 +28,8 @@ from planner.problems.base import (
 )
 from planner.state import State
 
+NO_TARGET_RADIUS_M = 1e3  # target radius that leaves the constraint inactive [m]
+
 
 class Theta3(ThetaProblem):
     """Foot placement of leg ``leg`` (0-based) on a leaf of S_{leg+1}."""
@@ -54,6 +56,9 @@ class Theta3(ThetaProblem):
             hfun, contact_xy, r.foot_radius_m
         )
         self.constrain("foot_on_terrain", centre - centre_on)
+        radius = self.par("target_radius_m", 1)
+        miss = contact - target
+        self.constrain("target_radius", ca.dot(miss, miss) - radius**2, -np.inf, 0.0)
         if o.slope_limit:
             self.constrain("slope", slope2, -np.inf, self.mu**2)
         self.maximise_log(
@@ -64,22 +69,48 @@ class Theta3(ThetaProblem):
         self.maximise_log("sigma3", o.placement_weights[2], sigma3_ca(d_theta, o))
         self._contact_fun = ca.Function("contact", [contact_xy], [contact])
 
-    def solve(self, state: State, target_W, x0=None) -> ThetaSolution:
+    def solve(
+        self, state: State, target_W, x0=None, target_radius_m: float | None = None
+    ) -> ThetaSolution:
         """Theta3(g*, tau, {r_i*}, i_f) of eq. 9 from a state whose leg ``leg`` swings.
 
         The result keeps ``state``'s body pose and other legs and puts leg ``leg`` down.
+        ``target_radius_m`` (beyond the paper) makes closeness to the target a hard
+        constraint: the contact point within that distance of it (a foothold chosen clear
+        of edges stays clear); None leaves only the objective's pull.
         """
+        self._radius = NO_TARGET_RADIUS_M if target_radius_m is None else float(target_radius_m)
         self._context = state  # the solve's fixed part, read by _state_from_x
         # CasADi reshapes column-major: R^T flattened row-major is R column-major.
         p = self.pack_params(
-            {"p": state.base_position_W, "R": state.base_rotation_W.T.ravel(), "target_W": target_W}
+            {
+                "p": state.base_position_W,
+                "R": state.base_rotation_W.T.ravel(),
+                "target_W": target_W,
+                "target_radius_m": [self._radius],
+            }
         )
         if x0 is None:
-            x0 = self.initial_guess(state)
+            x0 = self.initial_guess(state, target_W)
         return self.solve_packed(p, np.asarray(x0, float))
 
-    def initial_guess(self, state: State) -> np.ndarray:
-        """Decision vector at ``state``: the leg's joints and its foot's current xy."""
+    def initial_guess(self, state: State, target_W=None) -> np.ndarray:
+        """Decision vector: IK of the foot on ``target_W`` when reachable, else ``state``'s.
+
+        Starting at the target matters where the terrain between the foot and the target
+        is a gap or an edge: from the current foot IPOPT would have to drag the contact
+        point across it and stalls in the trench.
+        """
+        if target_W is not None:
+            from planner.contact import foot_centre_from_contact
+
+            t = np.asarray(target_W, float).reshape(3).copy()
+            t[2] = float(self.terrain.height(t[0], t[1]))
+            centre_W = foot_centre_from_contact(self.terrain, t, self.robot.foot_radius_m)
+            centre_B = state.base_rotation_W.T @ (centre_W - state.base_position_W)
+            ik = self.kin.ik_leg(self.leg, centre_B, reference_rad=state.joints_rad[self.leg])
+            if ik.reachable:
+                return np.concatenate([ik.joints_rad, t[:2]])
         foot_B = self.kin.foot_B(self.leg, state.joints_rad[self.leg])
         centre_W = state.base_rotation_W @ foot_B + state.base_position_W
         return np.concatenate([state.joints_rad[self.leg], centre_W[:2]])
@@ -102,4 +133,6 @@ class Theta3(ThetaProblem):
         }
         if self.options.slope_limit:
             v["slope"] = ck.slope(state, [self.leg], self.mu)
+        miss = float(np.linalg.norm(state.feet_W[self.leg] - p[self._p_slices["target_W"]]))
+        v["target_radius"] = max(miss - float(p[self._p_slices["target_radius_m"]][0]), 0.0)
         return v
