@@ -668,6 +668,16 @@ def _scaled(
     )
 
 
+# Clarabel settings tried in turn when a solve ends neither solved nor infeasible
+# (InsufficientProgress / NumericalError were seen on ordinary four-foot stances with
+# equilibration on; off, or with more regularisation, the same problems solve).
+_RETRIES = (
+    {},
+    {"equilibrate_enable": False},
+    {"static_regularization_constant": 1e-7},
+)
+
+
 def _settings() -> clarabel.DefaultSettings:
     s = clarabel.DefaultSettings()
     s.verbose = False
@@ -712,14 +722,19 @@ def _margin_socp(sc: _Scaled, com_W: _Array, mu: float) -> tuple[float, _Array, 
     q[-1] = -1.0
     cones = [clarabel.ZeroConeT(6), clarabel.NonnegativeConeT(1)]
     cones += [clarabel.SecondOrderConeT(3) for _ in range(k)]
-    solver = clarabel.DefaultSolver(_csc(np.zeros((nv, nv))), q, _csc(a), b, cones, _settings())
-    res = solver.solve()
-    status = str(res.status)
-    x = np.asarray(res.x)
-    if status in _SOLVED:
-        return float(x[-1]), x[:-1].reshape(k, 3), status
-    if status in ("PrimalInfeasible", "AlmostPrimalInfeasible"):
-        return -math.inf, np.zeros((k, 3)), status
+    status = "not solved"
+    for retry in _RETRIES:  # Clarabel now and then stalls on an ordinary stance: retry
+        settings = _settings()
+        for key, value in retry.items():
+            setattr(settings, key, value)
+        solver = clarabel.DefaultSolver(_csc(np.zeros((nv, nv))), q, _csc(a), b, cones, settings)
+        res = solver.solve()
+        status = str(res.status)
+        x = np.asarray(res.x)
+        if status in _SOLVED:
+            return float(x[-1]), x[:-1].reshape(k, 3), status
+        if status in ("PrimalInfeasible", "AlmostPrimalInfeasible"):
+            return -math.inf, np.zeros((k, 3)), status
     return math.nan, np.zeros((k, 3)), status
 
 

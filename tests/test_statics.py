@@ -464,3 +464,14 @@ def test_bad_casadi_and_region_inputs() -> None:
         feasible_com_region(RECT, 0.2, MASS, (0, 1, 2), 0.5, n_dirs=2)
     with pytest.raises(InputError, match="^com_z_m"):
         feasible_com_region(RECT, np.nan, MASS, (0, 1, 2), 0.5)
+
+
+def test_clarabel_stall_on_an_ordinary_stance_is_retried():
+    # a four-foot stance from a stepping-stones plan on which Clarabel with its default
+    # settings stopped with InsufficientProgress (margin nan): retried, it solves
+    feet = [[0.6372, 0.0655, 0.0042], [0.7413, -0.065, -0.0115], [0.4645, 0.0661, 0.0],
+            [0.4649, -0.0655, 0.0]]  # fmt: skip
+    res = static_feasibility(
+        feet, [0.5839, -0.0038, 0.1386], 3.004, [0, 1, 2, 3], 0.7, with_com_margin=False
+    )
+    assert res.feasible and res.status == "Solved" and res.margin_N > 1.0

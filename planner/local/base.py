@@ -370,7 +370,7 @@ class LocalPlanner:
                 normals,
                 with_com_margin=False,
             )
-            if res.margin_N < need:
+            if not res.margin_N >= need:  # nan (solver failure) fails too
                 return (
                     f"balance lost at sample {k} of the path (friction-cone margin "
                     f"{res.margin_N:.2f} N < {need:.2f} N): the COM leaves the support"

@@ -97,6 +97,9 @@ class HardPlanner(LocalPlanner):
         body_path = interpolate_leaf(
             self.robot, self.terrain, state, moved, self.settings.body_samples
         )
+        why = self.path_problem(body_path)
+        if why:
+            return Step(leg, False, state, None, None, [], [], "body_move", f"Omega_1: {why}")
         sol3, swing_path = self.swing(moved, leg, tau, stride_m, target)
         if not sol3.feasible:
             return Step(
