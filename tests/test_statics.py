@@ -468,10 +468,18 @@ def test_bad_casadi_and_region_inputs() -> None:
 
 def test_clarabel_stall_on_an_ordinary_stance_is_retried():
     # a four-foot stance from a stepping-stones plan on which Clarabel with its default
-    # settings stopped with InsufficientProgress (margin nan): retried, it solves
-    feet = [[0.6372, 0.0655, 0.0042], [0.7413, -0.065, -0.0115], [0.4645, 0.0661, 0.0],
-            [0.4649, -0.0655, 0.0]]  # fmt: skip
-    res = static_feasibility(
-        feet, [0.5839, -0.0038, 0.1386], 3.004, [0, 1, 2, 3], 0.7, with_com_margin=False
-    )
+    # settings stopped with InsufficientProgress (margin nan; the 1e-98 normal components
+    # upset its equilibration): retried, it solves
+    feet = [
+        [0.6371550368655762, 0.06551389006563385, 0.0042396384979301385],
+        [0.7413165285800238, -0.0649841446363585, -0.011524354066020008],
+        [0.46449929879574126, 0.06614357833307932, -6.806067470721544e-08],
+        [0.46491167127749056, -0.06552523559921215, -8.026618739803704e-08],
+    ]
+    normals = [[8.209883690974056e-05, -5.027502468919441e-07, 0.9999999966297641],
+               [-0.00012842327362273063, 5.326124765896361e-07, 0.9999999917535897],
+               [2.7224251321989382e-05, -4.94990675022635e-98, 0.9999999996294202],
+               [3.21064491235959e-05, 4.5584402522647566e-98, 0.9999999994845881]]  # fmt: skip
+    com = [0.5839186753820351, -0.003836096673121596, 0.13858309047892428]
+    res = static_feasibility(feet, com, 3.004, [0, 1, 2, 3], 0.7, normals, with_com_margin=False)
     assert res.feasible and res.status == "Solved" and res.margin_N > 1.0
