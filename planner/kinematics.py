@@ -15,6 +15,7 @@ its joint) or, as the paper assumes, the body link's alone.
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -215,14 +216,17 @@ class LegKinematics:
         centre = self._centres[leg]
         if centre is None:
             return self._ik_numeric(leg, target, ref, want, tol_m)
-        sols = self._ik_paden_kahan(leg, target, centre, tol_m)
+        groups = self._ik_paden_kahan(leg, target, centre, tol_m)
+        sols = [s for g in groups for s in g]
         if not sols:
             # no exact solution: only the closest in-limit angles are wanted (few starts)
             res = self._ik_numeric(leg, target, ref, want, tol_m, n_starts=4)
             res.method = "paden-kahan"
             res.reason = res.reason or "no exact in-limit solution"
             return res
-        preferred = [s for s in sols if want == 0 or self.knee_direction(leg, s) == want]
+        preferred = [
+            s for g in groups if want == 0 or self.knee_direction(leg, g[0]) == want for s in g
+        ]
         pool = preferred or sols
         best = min(pool, key=lambda s: float(np.sum((s - ref) ** 2)))
         err = float(np.linalg.norm(self.foot_B(leg, best) - target))
@@ -243,27 +247,39 @@ class LegKinematics:
         lg = self.legs[leg]
         return np.clip(np.zeros(3), lg.lower_rad, lg.upper_rad)
 
-    def _ik_paden_kahan(self, leg: int, target, centre, tol_m: float) -> list[np.ndarray]:
-        """All in-limit exact solutions: subproblem 3 (knee) then subproblem 2 (hip)."""
+    def _ik_paden_kahan(self, leg: int, target, centre, tol_m: float) -> list[list[np.ndarray]]:
+        """All in-limit exact solutions: subproblem 3 (knee) then subproblem 2 (hip).
+
+        Grouped by branch: each group holds the 2 pi wraps into the limits of one solution
+        (same foot position and knee direction; many for joints with wide limits).
+        """
         lg = self.legs[leg]
         delta = float(np.linalg.norm(target - centre))
         knees = pk.subproblem3(lg.axes_B[2], lg.points_B[2], lg.foot_B0, centre, delta)
-        out: list[np.ndarray] = []
+        out: dict[tuple, list[np.ndarray]] = {}  # base solution -> its wraps into limits
         for th3 in knees:
-            for th3w in _wrap_into_limits(th3, lg.lower_rad[2], lg.upper_rad[2]):
-                p = twist_apply_np(lg, np.array([0.0, 0.0, th3w]), lg.foot_B0)
-                for th1, th2 in pk.subproblem2(lg.axes_B[0], lg.axes_B[1], centre, p, target):
-                    for a in _wrap_into_limits(th1, lg.lower_rad[0], lg.upper_rad[0]):
-                        for b in _wrap_into_limits(th2, lg.lower_rad[1], lg.upper_rad[1]):
-                            s = np.array([a, b, th3w])
-                            if np.linalg.norm(self.foot_B(leg, s) - target) <= 1e3 * tol_m:
-                                out.append(s)
-        # remove duplicates (tangent cases give the same solution twice)
-        uniq: list[np.ndarray] = []
-        for s in out:
-            if all(np.max(np.abs(s - u)) > 1e-9 for u in uniq):
-                uniq.append(s)
-        return uniq
+            wraps3 = _wrap_into_limits(th3, lg.lower_rad[2], lg.upper_rad[2])
+            if not wraps3:
+                continue
+            p = twist_apply_np(lg, np.array([0.0, 0.0, th3]), lg.foot_B0)
+            for th1, th2 in pk.subproblem2(lg.axes_B[0], lg.axes_B[1], centre, p, target):
+                base = np.array([th1, th2, th3])
+                key = tuple(np.round(base, 9))
+                # tangent cases give a solution twice; FK is 2 pi periodic: check the base
+                # solution once, then wrap it into the limits
+                if key in out or np.linalg.norm(self.foot_B(leg, base) - target) > 1e3 * tol_m:
+                    continue
+                wraps = [
+                    np.array(w)
+                    for w in itertools.product(
+                        _wrap_into_limits(th1, lg.lower_rad[0], lg.upper_rad[0]),
+                        _wrap_into_limits(th2, lg.lower_rad[1], lg.upper_rad[1]),
+                        wraps3,
+                    )
+                ]
+                if wraps:
+                    out[key] = wraps
+        return list(out.values())
 
     def _ik_numeric(
         self, leg: int, target, ref, want: int, tol_m: float, n_starts: int = 24

@@ -72,6 +72,8 @@ class ThetaOptions:
     com_length_m: float = 0.01  # sigma4 = exp(-|r_c - r_c*|^2 / (2 com_length_m^2))
     target_length_m: float = 0.01  # Theta3 sigma1 = exp(-|r - r_t|^2 / (2 target_length_m^2))
     joint_scale_rad: float = 1.0  # sigma3 = exp(-|theta - theta_nor|^2 / (2 joint_scale^2))
+    jit: bool = False  # compile the NLP's functions to C with CasADi's JIT (needs a C compiler)
+    mu_init: float | None = None  # IPOPT's initial barrier parameter (None: its default 0.1)
 
 
 @dataclass
@@ -314,6 +316,10 @@ class ThetaProblem:
                 "hessian_approximation": "exact",
             },
         }
+        if self.options.mu_init is not None:
+            opts["ipopt"] |= {"mu_init": self.options.mu_init, "mu_strategy": "monotone"}
+        if self.options.jit:
+            opts |= {"jit": True, "compiler": "shell", "jit_options": {"flags": ["-O2"]}}
         self.solver = ca.nlpsol(self.name, "ipopt", {"x": x, "p": p, "f": f, "g": g}, opts)
         self._terms_fun = ca.Function(
             "terms",
