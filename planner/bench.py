@@ -858,7 +858,9 @@ def _target_text(v: dict[str, Any]) -> str:
 
 def add_bench_parser(subparsers) -> argparse.ArgumentParser:
     """Add ``bench theta [--n N] [--out DIR] [--seed S] [--terrains a,b] [--slsqp-n M]``."""
-    bench = subparsers.add_parser("bench", help="benchmarks (theta: IPOPT vs SLSQP)")
+    bench = subparsers.add_parser(
+        "bench", help="benchmarks (theta: IPOPT vs SLSQP; courses: walks per course)"
+    )
     sub = bench.add_subparsers(dest="bench_target", required=True)
     t = sub.add_parser("theta", help="Theta1-4: IPOPT vs SLSQP with finite differences")
     t.add_argument("--n", type=int, default=200, help="instances per Theta and terrain")
@@ -869,6 +871,9 @@ def add_bench_parser(subparsers) -> argparse.ArgumentParser:
         "--slsqp-n", type=int, default=None, help="SLSQP on a seeded subset of this size"
     )
     t.set_defaults(func=cmd_bench)
+    from planner.bench_courses import add_courses_parser
+
+    add_courses_parser(sub)
     return bench
 
 

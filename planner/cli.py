@@ -108,9 +108,17 @@ def _cmd_plan(args) -> int:
             flush=True,
         )
 
-    plan, report = plan_walk(
-        args.robot, args.terrain, goal, start, args.planner, settings, progress=progress
-    )
+    if getattr(args, "global_plan", False):  # section 9: CMA-ES over tau, planner/global_plan.py
+        from planner.global_plan import GlobalSettings, plan_global_walk, print_progress
+
+        gs = GlobalSettings(terms=args.terms, max_generations=args.generations)
+        plan, report = plan_global_walk(
+            args.robot, args.terrain, goal, start, args.planner, settings, gs, print_progress
+        )
+    else:
+        plan, report = plan_walk(
+            args.robot, args.terrain, goal, start, args.planner, settings, progress=progress
+        )
     print(file=sys.stderr)
     path = plan.save(args.out)
     o = plan.outcome
@@ -145,6 +153,16 @@ def _cmd_demo(args) -> int:
     )
     rc = _cmd_plan(plan_args)
     print(f"plan: {out / 'plan.json'}  (check it: stratawalk check {out / 'plan.json'})")
+    from planner.plan import Plan
+    from planner.plots import plan_series, plot_plan
+    from planner.replay import build_scene
+
+    plan = Plan.load(out / "plan.json")
+    series = plan_series(plan)
+    (out / "replay.html").write_text(build_scene(plan, series).html(), encoding="utf-8")
+    figures = plot_plan(plan, out / "figures", series=series)
+    print(f"replay: {out / 'replay.html'}  (open it in a browser; no server needed)")
+    print(f"figures: {', '.join(str(f) for f in figures)}")
     return rc
 
 
@@ -172,6 +190,14 @@ def build_parser() -> argparse.ArgumentParser:
     )
     pl.add_argument("--time-budget", type=float, default=120.0, help="[s]")
     pl.add_argument("--out", default="plan.json")
+    pl.add_argument(
+        "--global",
+        dest="global_plan",
+        action="store_true",
+        help="section 9: CMA-ES over sine-series trajectories (--time-budget per candidate)",
+    )
+    pl.add_argument("--terms", type=int, default=3, help="sine terms of --global's tau")
+    pl.add_argument("--generations", type=int, default=8, help="CMA-ES generations (--global)")
     pl.set_defaults(func=_cmd_plan)
     c = sub.add_parser("check", help="validate a plan independently (exit 1 on any violation)")
     c.add_argument("plan", help="plan.json written by `stratawalk plan`")
@@ -183,6 +209,18 @@ def build_parser() -> argparse.ArgumentParser:
     from planner.bench import add_bench_parser
 
     add_bench_parser(sub)
+    from planner.replay import add_replay_parser
+
+    add_replay_parser(sub)
+    from planner.plots import add_plot_parser
+
+    add_plot_parser(sub)
+    from planner.simulate import add_simulate_parser
+
+    add_simulate_parser(sub)
+    from planner.batch import add_batch_parser
+
+    add_batch_parser(sub)
     return p
 
 

@@ -21,7 +21,8 @@ segment start inside a ``course``):
 ``gap``
     A trench: ``x_start``, ``width``, ``depth`` (finite, positive down).
 ``barrier``
-    ``x`` (near face), ``height``, ``thickness``.
+    ``x`` (near face), ``height``, ``thickness``; optional ``opening`` [y0, y1], a gap in
+    the wall (no barrier for y0 <= y < y1).
 ``stepping_stones``
     A pit ``depth`` deep over ``x_start..x_end`` x ``y_start..y_end`` holding a centred grid of
     square stones (``size``, ``gap``) whose tops are at ``height`` + U(-1, 1) *
@@ -520,14 +521,25 @@ class _Barrier(_Kind):
         self.height = f.number("height", lo=0.0, lo_open=True, hi=1.0)
         self.thickness = f.number("thickness", lo=0.0, lo_open=True, hi=5.0)
         self.spec = {"x": self.x, "height": self.height, "thickness": self.thickness}
+        self.opening = f.pair("opening", None)
+        if self.opening is not None:
+            if self.opening[1] <= self.opening[0]:
+                raise f.fail("opening", f"need [y0, y1] with y1 > y0, got {self.opening}")
+            self.spec["opening"] = self.opening
 
     def expr(self, u: Any, y: Any, ops: Any) -> Any:
-        """The height on the smoothed [x, x + thickness)."""
-        return self.height * _box(u, self.x, self.x + self.thickness, self.w, ops)
+        """The height on the smoothed [x, x + thickness), less the smoothed opening."""
+        z = self.height * _box(u, self.x, self.x + self.thickness, self.w, ops)
+        if self.opening is not None:
+            z = z * (1.0 - _box(y, self.opening[0], self.opening[1], self.w, ops))
+        return z
 
     def sharp(self, u: np.ndarray, y: np.ndarray) -> np.ndarray:
-        """The height on [x, x + thickness)."""
-        return self.height * _box_sharp(u, self.x, self.x + self.thickness) + 0.0 * y
+        """The height on [x, x + thickness), zero in the opening."""
+        z = self.height * _box_sharp(u, self.x, self.x + self.thickness) + 0.0 * y
+        if self.opening is not None:
+            z = z * (1.0 - _box_sharp(y, self.opening[0], self.opening[1]))
+        return z
 
 
 def _region(f: _Fields, ctx: _Context) -> tuple[float, float, float, float]:

@@ -1,0 +1,263 @@
+"""The course benchmark: robots x courses x local planners, run by the batch machinery.
+
+``stratawalk bench courses`` (part of ``make bench``) plans every (robot, course, planner)
+walk from (0.2, 0) to (2.2, 0) with a time budget, through :func:`planner.batch.run_batch`
+(a local process pool, or a Dask cluster with ``--scheduler``), and tabulates per walk:
+reached (and validated by :func:`planner.validate.check_plan`), steps, planning time,
+the time the walk takes to execute (``plan.samples.time[-1]``) and their ratio (planning
+time / execution time; below 1 the planner is faster than the robot). Results stream to
+``courses.jsonl`` (``--resume`` continues an interrupted run) and are summarised in
+``courses.md`` and ``courses.json`` in the output folder.
+
+Planning times are wall-clock times of the local planner inside its job, measured with
+``--workers`` jobs at once on the machine (the JSON records the machine and its load).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from planner.batch import DEFAULTS, job_id, run_batch
+
+__all__ = [
+    "COURSES",
+    "PLANNERS",
+    "add_courses_parser",
+    "cmd_courses",
+    "course_jobs",
+    "render_markdown",
+    "run_course_bench",
+]
+
+COURSES = (
+    "flat",
+    "slope10",
+    "step5cm",
+    "stairs",
+    "rough2cm",
+    "rough4cm",
+    "gap6cm",
+    "stepping_stones",
+    "barrier75mm",
+)
+PLANNERS = ("soft", "recursive")
+ROBOTS = ("littledog",)
+START_XY = (0.2, 0.0)
+GOAL_XY = (2.2, 0.0)
+TIME_BUDGET_S = 60.0
+
+
+def course_jobs(
+    robots=ROBOTS,
+    courses=COURSES,
+    planners=PLANNERS,
+    start_xy=START_XY,
+    goal_xy=GOAL_XY,
+    time_budget_s: float = TIME_BUDGET_S,
+    seed: int = 0,
+) -> list[dict]:
+    """The batch jobs of the table, robot-major then course then planner."""
+    return [
+        DEFAULTS
+        | {
+            "robot": r,
+            "terrain": c,
+            "planner": p,
+            "start": [float(start_xy[0]), float(start_xy[1])],
+            "goal": [float(goal_xy[0]), float(goal_xy[1])],
+            "seed": int(seed),
+            "time_budget_s": float(time_budget_s),
+        }
+        for r in robots
+        for c in courses
+        for p in planners
+    ]
+
+
+def _row(job: dict, rec: dict | None) -> dict[str, Any]:
+    row = {k: job[k] for k in ("robot", "terrain", "planner")}
+    if rec is None:
+        return row | {"status": "missing"}
+    row["status"] = rec.get("status")
+    for k in (
+        "reached",
+        "validated",
+        "violations",
+        "steps",
+        "distance_to_goal_m",
+        "planning_time_s",
+        "walk_time_s",
+        "time_ratio",
+        "message",
+        "error",
+        "wall_time_s",
+    ):
+        if k in rec:
+            row[k] = rec[k]
+    return row
+
+
+def run_course_bench(
+    robots=ROBOTS,
+    courses=COURSES,
+    planners=PLANNERS,
+    time_budget_s: float = TIME_BUDGET_S,
+    out_dir: str | Path = "bench/results",
+    scheduler: str | None = None,
+    workers: int | None = None,
+    resume: bool = False,
+    progress: bool = True,
+) -> dict[str, Any]:
+    """Run the table's jobs and write ``courses.{jsonl,json,md}`` to ``out_dir``.
+
+    Without ``resume`` an old ``courses.jsonl`` is replaced; with it, finished jobs are
+    kept and only the others run. Returns the content of ``courses.json``.
+    """
+    from planner.bench import _machine
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    results = out / "courses.jsonl"
+    if not resume and results.exists():
+        results.unlink()
+    jobs = course_jobs(robots, courses, planners, time_budget_s=time_budget_s)
+    machine = _machine()
+    t0 = time.perf_counter()
+    summary = run_batch(
+        jobs,
+        out,
+        scheduler=scheduler,
+        workers=workers,
+        progress=progress,
+        results_name="courses.jsonl",
+    )
+    rows = [_row(j, summary.records.get(job_id(j))) for j in jobs]
+    result = {
+        "format": "stratawalk.bench.courses/1",
+        "config": {
+            "robots": list(robots),
+            "courses": list(courses),
+            "planners": list(planners),
+            "start": list(START_XY),
+            "goal": list(GOAL_XY),
+            "time_budget_s": time_budget_s,
+            "scheduler": scheduler,
+            "workers": workers or os.cpu_count(),
+        },
+        "machine": machine | {"load_average_1_5_15_at_end": [round(v, 2) for v in os.getloadavg()]},
+        "total_time_s": time.perf_counter() - t0,
+        "interrupted": summary.interrupted,
+        "rows": rows,
+    }
+    (out / "courses.json").write_text(json.dumps(result, indent=1, allow_nan=False) + "\n")
+    (out / "courses.md").write_text(render_markdown(result))
+    return result
+
+
+def _f(v, fmt: str) -> str:
+    return "-" if v is None else format(v, fmt)
+
+
+def render_markdown(result: dict[str, Any]) -> str:
+    """The table of ``courses.md``."""
+    c, m = result["config"], result["machine"]
+    lines = [
+        "# Course benchmark (`stratawalk bench courses`)",
+        "",
+        f"Walks from {tuple(c['start'])} to {tuple(c['goal'])} m, time budget "
+        f"{c['time_budget_s']:g} s each, {c['workers']} jobs at once"
+        + (f" on the Dask cluster {c['scheduler']}" if c["scheduler"] else "")
+        + f"; {m['nproc']} cores ({m['cpu'] or 'cpu unknown'}), load at start "
+        f"{m['load_average_1_5_15_at_start']}, commit {m['git_commit'] or '?'}, {m['date']}. "
+        f"Total {result['total_time_s']:.0f} s"
+        + (" (interrupted: rows marked missing)" if result["interrupted"] else "")
+        + ".",
+        "",
+        "reached = the COM within 5 cm of the goal *and* the plan passes `stratawalk check`; "
+        "ratio = planning time / time the walk takes to execute.",
+        "",
+        "| robot | course | planner | reached | validated | steps | planning [s] | walk [s] "
+        "| ratio | left [m] | note |",
+        "|---|---|---|---|---|---:|---:|---:|---:|---:|---|",
+    ]
+    for r in result["rows"]:
+        if r["status"] != "ok":
+            note = r.get("error") or r["status"]
+            lines.append(
+                f"| {r['robot']} | {r['terrain']} | {r['planner']} | - | - | - | - | - | - | - "
+                f"| {note[:80]} |"
+            )
+            continue
+        note = "" if r["reached"] else r.get("message", "")[:80]
+        if r.get("violations"):
+            note = (
+                (note + "; " if note else "")
+                + "violations: "
+                + ", ".join(f"{k} {v}" for k, v in r["violations"].items())
+            )
+        lines.append(
+            f"| {r['robot']} | {r['terrain']} | {r['planner']} | "
+            f"{'yes' if r['reached'] else 'no'} | {'yes' if r['validated'] else 'no'} | "
+            f"{r['steps']} | {_f(r.get('planning_time_s'), '.1f')} | "
+            f"{_f(r.get('walk_time_s'), '.1f')} | {_f(r.get('time_ratio'), '.3f')} | "
+            f"{_f(r.get('distance_to_goal_m'), '.3f')} | {note.replace('|', '/')} |"
+        )
+    ok = [r for r in result["rows"] if r["status"] == "ok"]
+    lines += [
+        "",
+        f"Reached: {sum(bool(r['reached']) for r in ok)} of {len(result['rows'])} walks.",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def add_courses_parser(bench_sub) -> argparse.ArgumentParser:
+    """Add ``bench courses`` to the ``bench`` subcommands."""
+    p = bench_sub.add_parser("courses", help="robots x courses x planners: reached, steps, times")
+    p.add_argument("--robots", default=",".join(ROBOTS), help="comma-separated names")
+    p.add_argument("--courses", default=",".join(COURSES), help="comma-separated terrains")
+    p.add_argument("--planners", default=",".join(PLANNERS), help="soft,hard,recursive")
+    p.add_argument("--time-budget", type=float, default=TIME_BUDGET_S, help="[s] per walk")
+    p.add_argument("--out", default="bench/results", help="output folder")
+    p.add_argument("--scheduler", help="tcp://HOST:PORT of a running Dask scheduler")
+    p.add_argument("--workers", type=int, default=None, help="local processes (default: cores)")
+    p.add_argument("--resume", action="store_true", help="keep finished jobs of courses.jsonl")
+    p.set_defaults(func=cmd_courses)
+    return p
+
+
+def cmd_courses(args) -> int:
+    """Run ``stratawalk bench courses`` and print the markdown table."""
+    from planner.errors import InputError
+
+    def names(text: str, what: str) -> tuple[str, ...]:
+        out = tuple(s.strip() for s in text.split(",") if s.strip())
+        if not out:
+            raise InputError(f"--{what}: give at least one name, comma-separated")
+        return out
+
+    planners = names(args.planners, "planners")
+    bad = [p for p in planners if p not in ("soft", "hard", "recursive")]
+    if bad:
+        raise InputError(f"--planners: unknown '{bad[0]}'; use soft, hard, recursive")
+    if not args.time_budget > 0:
+        raise InputError(f"--time-budget: must be > 0 s, got {args.time_budget}")
+    result = run_course_bench(
+        robots=names(args.robots, "robots"),
+        courses=names(args.courses, "courses"),
+        planners=planners,
+        time_budget_s=args.time_budget,
+        out_dir=args.out,
+        scheduler=args.scheduler,
+        workers=args.workers,
+        resume=args.resume,
+    )
+    print(render_markdown(result))
+    print(f"wrote {Path(args.out) / 'courses.md'} and courses.json, courses.jsonl", file=sys.stderr)
+    return 0

@@ -1,0 +1,451 @@
+"""Feedback from a measured state (paper 8.3) and precompute-then-correct (8.4).
+
+A :class:`StateSource` measures the robot: base pose, joint angles and which feet touch
+(on LittleDog: motion capture and joint encoders). :class:`SimulatedMocap` stands in for
+it with the MuJoCo simulator of :mod:`planner.simulate`, optionally with Gaussian noise
+and a latency.
+
+Feedback (8.3), :func:`run_feedback`: every cycle (one gait step) the soft-persuasion
+planner of 8.2 starts from the *measured* configuration: measured base pose and joints,
+the stance feet where the robot's feet actually are (projected onto the terrain), and
+plans the next step from there (Theta2 body move, Theta3 foothold, the same gait queue
+and failure handling as :meth:`planner.local.soft.SoftPlanner.plan`), which the
+simulator then executes. Slip, rolling of the feet and servo compliance do not
+accumulate: each step starts from the truth.
+
+Precompute-then-correct (8.4), :func:`run_corrected`: the precomputed plan is executed
+cycle by cycle; at each cycle start the measured foot centres are compared with the
+plan's, the cycle's base path is shifted by their mean offset (the body keeps its planned
+place relative to its support, so the centre of mass stays where the plan balanced it),
+the stance feet are held where they are, the swing foot blends from where it is to its
+planned (world) foothold, and the set-points are re-solved by Paden-Kahan leg IK
+(:mod:`planner.kinematics`). Footholds return to the plan's, so errors stay bounded.
+
+:func:`shift_body` moves a plan's body against its feet (IK again): a plan perturbed on
+purpose, to check that the simulator notices a centre of mass outside the support.
+"""
+
+from __future__ import annotations
+
+import math
+import time as _time
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from planner.errors import InputError
+from planner.plan import Plan, Samples
+from planner.simulate import (
+    SimResult,
+    SimSettings,
+    Simulator,
+    cycle_starts,
+    finish_run,
+    new_run,
+)
+
+__all__ = [
+    "Measurement",
+    "SimulatedMocap",
+    "StateSource",
+    "blend_in",
+    "correct_cycle",
+    "measured_state",
+    "run_corrected",
+    "run_feedback",
+    "shift_body",
+]
+
+_Array = NDArray[np.float64]
+
+
+@dataclass
+class Measurement:
+    """A measured configuration: time [s], Pinocchio ``q`` (19,), feet touching (4,)."""
+
+    time_s: float
+    q: _Array
+    contact: NDArray[np.bool_]
+
+
+class StateSource(Protocol):
+    """What feedback needs from the robot: its measured configuration (section 8.3)."""
+
+    def measure(self) -> Measurement:
+        """The latest available measurement."""
+
+
+class SimulatedMocap:
+    """The simulator as motion capture plus joint encoders, with noise and latency.
+
+    Base position noise ``position_noise_m`` (per axis), base orientation noise
+    ``angle_noise_rad`` (a random rotation vector per axis), joint noise
+    ``joint_noise_rad``, all Gaussian; ``latency_s``: the measurement returned is the
+    configuration that many seconds old (from the simulator's history, recorded every
+    control tick).
+    """
+
+    def __init__(
+        self,
+        sim: Simulator,
+        position_noise_m: float = 0.0,
+        angle_noise_rad: float = 0.0,
+        joint_noise_rad: float = 0.0,
+        latency_s: float = 0.0,
+        seed: int = 0,
+    ):
+        for name, v in (
+            ("position_noise_m", position_noise_m),
+            ("angle_noise_rad", angle_noise_rad),
+            ("joint_noise_rad", joint_noise_rad),
+            ("latency_s", latency_s),
+        ):
+            if not (math.isfinite(v) and v >= 0.0):
+                raise InputError(f"simulate: {name} must be a number >= 0, got {v!r}")
+        self.sim = sim
+        self.position_noise_m = position_noise_m
+        self.angle_noise_rad = angle_noise_rad
+        self.joint_noise_rad = joint_noise_rad
+        self.latency_s = latency_s
+        self.rng = np.random.default_rng(seed)
+        if latency_s > 0.0:
+            sim.history_s = max(sim.history_s, latency_s)
+
+    def measure(self) -> Measurement:
+        """The simulator's configuration ``latency_s`` ago, with noise."""
+        sim = self.sim
+        if self.latency_s > 0.0 and sim.history:
+            want = sim.time - self.latency_s
+            older = [h for h in sim.history if h[0] <= want + 1e-9]
+            t, q, contact = older[-1] if older else sim.history[0]
+            q, contact = q.copy(), contact.copy()
+        else:
+            t, q, contact = sim.time, sim.q(), sim.touches().feet
+        q[:3] += self.rng.normal(0.0, self.position_noise_m, 3) if self.position_noise_m else 0.0
+        if self.angle_noise_rad:
+            import pinocchio as pin
+
+            R = pin.Quaternion(q[6], q[3], q[4], q[5]).toRotationMatrix()
+            R = pin.exp3(self.rng.normal(0.0, self.angle_noise_rad, 3)) @ R
+            qq = pin.Quaternion(R)
+            q[3:7] = [qq.x, qq.y, qq.z, qq.w]
+        if self.joint_noise_rad:
+            q[7:] += self.rng.normal(0.0, self.joint_noise_rad, len(q) - 7)
+        return Measurement(float(t), q, np.asarray(contact, bool))
+
+
+def _foot_centres(robot, q: _Array) -> _Array:
+    """(4, 3) foot sphere centres of a Pinocchio configuration."""
+    from planner.kinematics import kinematics_of
+    from planner.lie import rotation_from_quat
+
+    kin = kinematics_of(robot)
+    return kin.feet_W(q[:3], rotation_from_quat(q[3:7]), robot.joints_from_q(q))
+
+
+def measured_state(robot, terrain, meas: Measurement):
+    """The planner's :class:`~planner.state.State` of a measurement (section 8.3).
+
+    Base pose and joints as measured; every foot taken as a stance foot (a cycle starts
+    on S0) at the contact point under its measured sphere centre, put on the terrain the
+    planner sees (``terrain.height``), so that the Theta problems start on a leaf.
+    """
+    from planner.contact import contact_from_foot_centre
+    from planner.lie import rotation_from_quat
+    from planner.state import State
+
+    q = meas.q
+    centres = _foot_centres(robot, q)
+    feet = contact_from_foot_centre(terrain, centres, robot.foot_radius_m)
+    feet[:, 2] = np.asarray(terrain.height(feet[:, 0], feet[:, 1]), float)
+    return State(
+        base_position_W=q[:3].copy(),
+        base_rotation_W=rotation_from_quat(q[3:7] / np.linalg.norm(q[3:7])),
+        feet_W=feet,
+        joints_rad=robot.joints_from_q(q),
+        stratum=0,
+        support=(0, 1, 2, 3),
+        info={"measured_at_s": meas.time_s},
+    )
+
+
+def _source(sim: Simulator, source: StateSource | None, **noise) -> StateSource:
+    return source if source is not None else SimulatedMocap(sim, **noise)
+
+
+# ------------------------------------------------------------------------------ 8.3
+def run_feedback(
+    plan: Plan,
+    settings: SimSettings | None = None,
+    source: StateSource | None = None,
+    local_settings=None,
+    max_cycles: int | None = None,
+    no_progress_cycles: int = 16,
+    **noise,
+) -> SimResult:
+    """Walk to the plan's goal re-planning every step from the measured state (8.3).
+
+    The robot starts, settled, at the plan's first configuration; the soft planner
+    (section 8.2, ``local_settings``) plans one cycle at a time
+    (:meth:`planner.local.base.LocalPlanner.step`) from ``source`` (default:
+    :class:`SimulatedMocap` of the simulator with ``noise``: position_noise_m,
+    angle_noise_rad, joint_noise_rad, latency_s, seed). Stops at the goal, after
+    ``max_cycles`` (default: twice the plan's cycles plus 20), after ``max_fails_in_row``
+    failed step attempts in a row, when the COM has not come 1 cm closer to the goal in
+    ``no_progress_cycles`` cycles, or on a fall.
+    """
+    from planner.local.gait_queue import GaitQueue
+    from planner.local.soft import LocalSettings, SoftPlanner
+    from planner.state import contact_mask
+    from planner.trajectory import Trajectory
+
+    wall0 = _time.perf_counter()
+    sim, ex = new_run(plan, settings, "feedback")
+    t0 = sim.time
+    src = _source(sim, source, **noise)
+    robot, terrain = plan.load_robot(), plan.load_terrain()
+    st = local_settings or LocalSettings()
+    local = SoftPlanner(robot, terrain, mu=plan.friction, settings=st)
+    tau = Trajectory.straight(plan.start[:2], plan.goal[:2], terrain, local.com_height_m())
+    goal = plan.goal[:2]
+    n_plan = max(len(cycle_starts(plan.samples.contact)), 1)
+    max_cycles = max_cycles if max_cycles is not None else 2 * n_plan + 20
+    queue = GaitQueue(st.gait)
+    step_scale = {i: 1.0 for i in range(4)}
+    fails, cycles, steps, best, best_at = 0, 0, 0, math.inf, 0
+    m = ex.monitor.metrics
+    while True:
+        state = measured_state(robot, terrain, src.measure())
+        dist = float(np.linalg.norm(local.check.com_W(state)[:2] - goal))
+        if dist < best - 0.01:
+            best, best_at = dist, cycles
+        if ex.stopped:
+            message = f"fell at {m.fall_time_s:.1f} s ({m.fall_reason})"
+            break
+        if dist <= st.goal_tol_m:
+            message = f"reached the goal: measured COM {100 * dist:.1f} cm from it"
+            break
+        if cycles >= max_cycles:
+            message = f"stopped after {cycles} cycles (max_cycles)"
+            break
+        if fails >= st.max_fails_in_row:
+            message = f"stuck: {fails} failed step attempts in a row"
+            break
+        if cycles - best_at >= no_progress_cycles:
+            message = (
+                f"no progress in {no_progress_cycles} cycles (COM {100 * dist:.0f} cm from goal)"
+            )
+            break
+        # one cycle of the soft planner (SoftPlanner._run), from the measured state
+        cycles += 1
+        leg = queue.pop()
+        step = local.step(state, leg, tau, local.stride_m() * step_scale[leg])
+        if step.ok:
+            step_scale[leg] = 1.0
+            fails = 0
+            steps += 1
+            queue.push(leg)
+        else:
+            if step.phase == "foot_placement":
+                step_scale[leg] = max(step_scale[leg] * 0.5, st.min_step_fraction)
+            queue.swap(leg)
+            fails += 1
+            m.replans += 1
+        if step.moved is None:
+            continue  # the body move failed: nothing to execute
+        body_s = float(np.linalg.norm(step.moved.base_position_W - state.base_position_W))
+        body_s = max(body_s / st.body_speed_m_s, 0.2)
+        swing = step.swing_path if step.ok else []
+        path = list(step.body_path) + list(swing[1:])
+        times = _path_times(len(step.body_path), len(swing), body_s, st.swing_time_s)
+        q = np.array(
+            [robot.q_from(s.base_position_W, s.base_quaternion_xyzw, s.joints_rad) for s in path]
+        )
+        contact = np.array([contact_mask(s.stratum) for s in path])
+        q = blend_in(robot, q, contact, times, sim.targets())
+        ex.monitor.keyframe(0)
+        m.cycles += 1
+        if not ex.follow(times, q, contact):
+            message = f"fell at {m.fall_time_s:.1f} s ({m.fall_reason})"
+            break
+    m.message = message
+    extra = {
+        "feedback": {
+            "steps": steps,
+            "cycles": cycles,
+            "planner_solves": local.stats,
+            "planner_failures": local.failures[-50:],
+        }
+    }
+    return finish_run(plan, ex, wall0, t0, extra)
+
+
+def _path_times(n_body: int, n_swing: int, body_s: float, swing_s: float) -> _Array:
+    """Plan times of a body path (n_body samples over body_s) then a swing (over swing_s)."""
+    t = list(np.linspace(0.0, body_s, n_body)) if n_body > 1 else [0.0]
+    if n_swing > 1:
+        t += list(body_s + swing_s * np.arange(1, n_swing) / (n_swing - 1))
+    return np.array(t)
+
+
+# ------------------------------------------------------------------------------ 8.4
+def correct_cycle(
+    robot,
+    plan_q: _Array,
+    plan_contact: NDArray,
+    plan_centres: _Array,
+    meas: Measurement,
+    times: _Array | None = None,
+    current_joints: _Array | None = None,
+) -> tuple[_Array, int]:
+    """Corrected set-points of one cycle of a plan from a measurement (section 8.4).
+
+    ``plan_q`` (n, 19), ``plan_contact`` (n, 4), ``plan_centres`` (n, 4, 3): the cycle's
+    samples, foot sphere centres from FK. With ``times`` (n,) and ``current_joints``
+    (12,, robot order; the set-points now), the jump from the current set-points to the
+    corrected ones is spread over the cycle's four-feet phase (until the first lift-off).
+    Returns (corrected q (n, 19), IK misses).
+    """
+    from planner.kinematics import kinematics_of
+    from planner.lie import rotation_from_quat
+
+    kin = kinematics_of(robot)
+    c_meas = _foot_centres(robot, meas.q)
+    down = plan_contact[0]
+    d = np.mean((c_meas - plan_centres[0])[down], axis=0) if down.any() else np.zeros(3)
+    n = len(plan_q)
+    out = plan_q.copy()
+    misses = 0
+    lift = [None] * 4  # sample of lift-off and of touchdown, per leg
+    for i in range(4):
+        up = np.flatnonzero(~plan_contact[:, i])
+        if up.size:
+            ks = int(up[0])
+            after = np.flatnonzero(plan_contact[ks:, i])
+            kt = ks + int(after[0]) if after.size else n - 1
+            lift[i] = (max(ks - 1, 0), kt)
+    for k in range(n):
+        p = plan_q[k, :3] + d
+        R = rotation_from_quat(plan_q[k, 3:7])
+        ref = robot.joints_from_q(plan_q[k])
+        joints = np.empty((4, 3))
+        for i in range(4):
+            if lift[i] is None or k <= lift[i][0]:
+                target = c_meas[i]
+            elif k < lift[i][1]:
+                a, b = lift[i]
+                u = (k - a) / max(b - a, 1)
+                target = plan_centres[k, i] + (1.0 - u) * (c_meas[i] - plan_centres[0, i])
+            else:
+                target = plan_centres[k, i]
+            res = kin.ik_leg(i, R.T @ (target - p), reference_rad=ref[i])
+            misses += int(not res.reachable)
+            joints[i] = res.joints_rad
+        out[k] = robot.q_from(p, plan_q[k, 3:7], joints)
+    if times is not None and current_joints is not None:
+        out = blend_in(robot, out, plan_contact, times, current_joints)
+    return out, misses
+
+
+def blend_in(robot, q: _Array, contact: NDArray, times: _Array, current_joints: _Array) -> _Array:
+    """Set-points ``q`` (n, 19) that start from ``current_joints`` (12,, robot order).
+
+    The difference between the servos' set-points now and the first new sample (the
+    servo error that holds the robot up, when the new samples start from a measured
+    configuration; a correction's jump) fades out linearly over the four-feet phase
+    that opens the cycle (until its first lift-off).
+    """
+    n = len(q)
+    if n < 2:
+        return q
+    up = np.flatnonzero(~np.asarray(contact, bool).all(axis=1))
+    t_end = times[up[0] - 1] if up.size and up[0] > 1 else times[-1]
+    span = max(float(t_end - times[0]), 1e-9)
+    jump = np.asarray(current_joints, float).reshape(4, 3) - robot.joints_from_q(q[0])
+    out = q.copy()
+    for k in range(n):
+        w = 1.0 - min(float(times[k] - times[0]) / span, 1.0)
+        if w > 0.0:
+            out[k] = robot.q_from(q[k, :3], q[k, 3:7], robot.joints_from_q(q[k]) + w * jump)
+    return out
+
+
+def run_corrected(
+    plan: Plan,
+    settings: SimSettings | None = None,
+    source: StateSource | None = None,
+    **noise,
+) -> SimResult:
+    """Execute the precomputed plan, correcting it from the measured state (8.4).
+
+    Corrections are made at every cycle start (touchdown) and again at every lift-off, so
+    that the swing foot is aimed from where the body really is. ``noise`` as in
+    :func:`run_feedback`.
+    """
+    wall0 = _time.perf_counter()
+    sim, ex = new_run(plan, settings, "precompute-then-correct")
+    t0 = sim.time
+    src = _source(sim, source, **noise)
+    robot = plan.load_robot()
+    s = plan.samples
+    centres = plan.foot_centres_W()
+    cycles = set(cycle_starts(s.contact))
+    allc = s.contact.all(axis=1)
+    lifts = {k for k in range(1, len(s) - 1) if allc[k] and not allc[k + 1]}
+    starts = sorted(cycles | lifts | {len(s) - 1})
+    m = ex.monitor.metrics
+    for a, b in zip(starts[:-1], starts[1:], strict=True):
+        meas = src.measure()
+        q, misses = correct_cycle(
+            robot,
+            s.q[a : b + 1],
+            s.contact[a : b + 1],
+            centres[a : b + 1],
+            meas,
+            s.time[a : b + 1],
+            sim.targets(),
+        )
+        m.ik_misses += misses
+        if a in cycles:
+            ex.monitor.keyframe(0)
+            m.cycles += 1
+        if not ex.follow(s.time[a : b + 1], q, s.contact[a : b + 1]):
+            break
+    return finish_run(plan, ex, wall0, t0)
+
+
+# ------------------------------------------------------------------------------ perturbing
+def shift_body(plan: Plan, offset_W: ArrayLike, mask: ArrayLike | None = None) -> Plan:
+    """A copy of ``plan`` with the body moved by ``offset_W`` [m] against its feet.
+
+    In the samples selected by ``mask`` (all by default) the base position moves by the
+    offset and the joints are re-solved (leg IK) so that every foot stays where the plan
+    put it: the centre of mass moves by about the offset relative to the support. Used to
+    make a plan that must fail on a body with mass.
+    """
+    from planner.kinematics import kinematics_of
+    from planner.lie import rotation_from_quat
+
+    robot = plan.load_robot()
+    kin = kinematics_of(robot)
+    off = np.asarray(offset_W, float).reshape(3)
+    sel = np.ones(len(plan.samples), bool) if mask is None else np.asarray(mask, bool)
+    centres = plan.foot_centres_W()
+    q = plan.samples.q.copy()
+    for k in np.flatnonzero(sel):
+        p = q[k, :3] + off
+        R = rotation_from_quat(q[k, 3:7])
+        ref = robot.joints_from_q(q[k])
+        joints = np.array(
+            [
+                kin.ik_leg(i, R.T @ (centres[k, i] - p), reference_rad=ref[i]).joints_rad
+                for i in range(4)
+            ]
+        )
+        q[k] = robot.q_from(p, q[k, 3:7], joints)
+    out = Plan.from_dict(plan.to_dict(), source=f"{plan.source} (body shifted {off.tolist()})")
+    out.samples = Samples(plan.samples.time.copy(), q, plan.samples.contact.copy())
+    out._robot_cache, out._terrain_cache = plan._robot_cache, plan._terrain_cache
+    return out

@@ -1,0 +1,382 @@
+"""Replay in meshcat: the scene, the self-contained HTML in a real browser, the live server."""
+
+import base64
+import fcntl
+import io
+import json
+import os
+import re
+import shutil
+import subprocess
+import tempfile
+import time
+import urllib.request
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+import umsgpack
+from PIL import Image
+
+from planner.cli import main
+from planner.errors import InputError
+from planner.local.soft import LocalSettings
+from planner.plan import Plan
+from planner.plots import plan_series
+from planner.replay import ReplayServer, build_scene, check_host, scene_html
+from planner.walk import plan_walk
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+
+
+@pytest.fixture(scope="module")
+def walk(tmp_path_factory):
+    """A short validated walk on flat ground (two crawl steps), saved to a file."""
+    plan, report = plan_walk("littledog", "flat", (0.3, 0.0), (0.2, 0.0), "soft", LocalSettings())
+    assert report.ok, report.summary()
+    path = plan.save(tmp_path_factory.mktemp("replay") / "plan.json")
+    plan = Plan.load(path)
+    return path, plan, plan_series(plan)
+
+
+@pytest.fixture(scope="module")
+def scene(walk):
+    _, plan, series = walk
+    return build_scene(plan, series)
+
+
+def _commands(scene):
+    return [umsgpack.unpackb(packed) for _, _, packed in scene.commands]
+
+
+def _animation(scene):
+    (anim,) = [c for c in _commands(scene) if c["type"] == "set_animation"]
+    return {a["path"].split("/stratawalk/")[-1]: a["clip"] for a in anim["animations"]}, anim
+
+
+def _track(clips, path, prop):
+    (track,) = [t for t in clips[path]["tracks"] if t["name"] == "." + prop]
+    return np.array([k["time"] for k in track["keys"]]), [k["value"] for k in track["keys"]]
+
+
+# ---------------------------------------------------------------------------- the scene
+def test_scene_draws_every_part(scene, walk):
+    _, plan, _ = walk
+    objects = {
+        c["path"].split("/stratawalk/")[-1] for c in _commands(scene) if c["type"] == "set_object"
+    }
+    robot = plan.load_robot()
+    assert {f"robot/{n}_0" for n in ("body", "FL_upper", "HR_foot")} <= objects
+    assert len([o for o in objects if o.startswith("robot/")]) == 13  # LittleDog's visuals
+    for part in ("terrain/surface", "terrain/grid", "com/ball", "com/foot/disc", "com/drop/line",
+                 "paths/base", "paths/com_ground", "stratum/S0", "stratum/S4"):  # fmt: skip
+        assert part in objects, part
+    for leg in ("FL", "FR", "HL", "HR"):
+        assert {f"feet/{leg}/stance", f"feet/{leg}/swing", f"forces/{leg}/shaft",
+                f"forces/{leg}/head"} <= objects  # fmt: skip
+    n_stances = 1 + int(np.count_nonzero(np.any(np.diff(plan.samples.contact, axis=0), axis=1)))
+    assert len([o for o in objects if o.endswith("/fill")]) == n_stances
+    assert robot.name == "littledog"
+
+
+def test_terrain_mesh_is_the_plan_grid(scene, walk):
+    _, plan, _ = walk
+    (cmd,) = [c for c in _commands(scene) if c["path"].endswith("terrain/surface")]
+    (geom,) = cmd["object"]["geometries"]
+    pos = geom["data"]["attributes"]["position"]
+    verts = np.frombuffer(pos["array"].data, dtype=np.float32).reshape(-1, 3)
+    g = plan.terrain_grid
+    ix = np.rint((verts[:, 0] - g.origin[0]) / g.resolution).astype(int)
+    iy = np.rint((verts[:, 1] - g.origin[1]) / g.resolution).astype(int)
+    np.testing.assert_allclose(verts[:, 2], g.heights[iy, ix], atol=1e-6)
+    assert verts[:, 0].min() <= plan.samples.q[:, 0].min() - 0.25
+
+
+def test_animation_follows_the_samples(scene, walk):
+    _, plan, series = walk
+    clips, anim = _animation(scene)
+    assert anim["options"]["play"] is True
+    t = plan.samples.time
+    # every clip spans the whole walk (else clips loop out of step with each other)
+    for path, clip in clips.items():
+        times = [k["time"] for tr in clip["tracks"] for k in tr["keys"]]
+        assert min(times) == pytest.approx(t[0]) and max(times) == pytest.approx(t[-1]), path
+    # each visual follows Pinocchio's placement of it at every sample's q
+    robot = plan.load_robot()
+    model, data = robot.model, robot.model.createData()
+    visual = pin.buildGeomFromUrdf(model, str(robot.urdf_path), pin.GeometryType.VISUAL)
+    gdata = pin.GeometryData(visual)
+    times, pos = _track(clips, "robot/HL_lower_0", "position")
+    np.testing.assert_allclose(times, t)
+    gid = visual.getGeometryId("HL_lower_0")
+    for k in (0, len(t) // 2, len(t) - 1):
+        pin.forwardKinematics(model, data, plan.samples.q[k])
+        pin.updateGeometryPlacements(model, data, visual, gdata)
+        np.testing.assert_allclose(pos[k], gdata.oMg[gid].translation, atol=1e-12)
+    # stance / swing colours flip exactly with the contact flags
+    for leg, name in enumerate(("FL", "FR", "HL", "HR")):
+        times, vis = _track(clips, f"feet/{name}/stance", "visible")
+        down = plan.samples.contact[:, leg]
+        for tk, v in zip(times, vis, strict=True):
+            k = int(np.flatnonzero(np.isclose(t, tk))[0])
+            assert v == bool(down[k])
+        times_s, vis_s = _track(clips, f"feet/{name}/swing", "visible")
+        assert [not v for v in vis_s] == vis and np.allclose(times_s, times)
+    # arrows: length proportional to newtons, colour from the cone margin
+    m_per_N = scene.info["m_per_N"]
+    _, scale = _track(clips, "forces/HR/shaft", "scale")
+    _, tip = _track(clips, "forces/HR/head", "position")
+    head = scene.info["arrow_head_m"]
+    length = np.array(scale)[:, 2] + head
+    mag = np.linalg.norm(series.forces_W[:, 3], axis=1)
+    on = mag * m_per_N > head + 1e-3
+    assert on.sum() > len(t) // 2
+    np.testing.assert_allclose(length[on], mag[on] * m_per_N, rtol=1e-9)
+    np.testing.assert_allclose(np.array(tip)[:, 2], np.array(scale)[:, 2])
+    _, colour = _track(clips, "forces/HR/shaft/<object>", "material.color")
+    assert np.all(np.array(colour)[on, 1] > np.array(colour)[on, 0])  # inside the cone: green
+    # the stratum label shown is the sample's stratum
+    for st in range(5):
+        times, vis = _track(clips, f"stratum/S{st}", "visible")
+        for tk, v in zip(times, vis, strict=True):
+            k = int(np.flatnonzero(np.isclose(t, tk))[0])
+            assert v == (series.stratum[k] == st)
+
+
+def test_html_is_self_contained(scene):
+    page = scene_html(scene)
+    assert "new MeshCat.Viewer" in page and "handle_command_bytearray" in page
+    assert "viewer.connect" not in page  # no websocket
+    # nothing is fetched from elsewhere: no src/href/url()/import to a remote address
+    remote = re.findall(
+        r"""(?:src|href)\s*=\s*["']?\s*(?:https?:)?//|url\(\s*["']?(?:https?:)?//|"""
+        r"""import\s*\(\s*["'](?:https?:)?//|fetch\(\s*["'](?:https?:)?//""",
+        page,
+    )
+    assert remote == []
+    hosts = set(re.findall(r"https?://([a-zA-Z0-9.-]+)", page))
+    assert hosts <= {"www.w3.org"}, hosts  # XML namespace names only, never loaded
+
+
+# ---------------------------------------------------------------------------- a real browser
+class _Chromium:
+    """Headless Chromium driven over the DevTools protocol on a pipe (fds 3 and 4)."""
+
+    FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--use-gl=angle",
+             "--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--disable-quic",
+             "--no-first-run", "--disable-background-networking", "--disable-component-update",
+             "--disable-sync", "--window-size=1000,700", "--remote-debugging-pipe"]  # fmt: skip
+
+    def __init__(self):
+        self.profile = tempfile.mkdtemp(prefix="stratawalk-chromium-")
+        to_r, to_w = os.pipe()
+        from_r, from_w = os.pipe()
+        a = fcntl.fcntl(to_r, fcntl.F_DUPFD, 10)
+        b = fcntl.fcntl(from_w, fcntl.F_DUPFD, 10)
+        os.close(to_r)
+        os.close(from_w)
+
+        def child_fds():  # dup2 clears close-on-exec: Chromium reads 3, writes 4
+            os.dup2(a, 3)
+            os.dup2(b, 4)
+
+        self.proc = subprocess.Popen(
+            [CHROMIUM, *self.FLAGS, f"--user-data-dir={self.profile}", "about:blank"],
+            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+            preexec_fn=child_fds, close_fds=False,
+        )  # fmt: skip
+        os.close(a)
+        os.close(b)
+        self.send_fd, self.recv_fd = to_w, from_r
+        self.buf, self.next_id, self.events = b"", 0, []
+
+    def _message(self, deadline):
+        while b"\0" not in self.buf:
+            if time.monotonic() > deadline:
+                raise TimeoutError("chromium did not answer")
+            chunk = os.read(self.recv_fd, 1 << 20)
+            if not chunk:
+                raise RuntimeError("chromium closed the pipe")
+            self.buf += chunk
+        msg, self.buf = self.buf.split(b"\0", 1)
+        return json.loads(msg)
+
+    def call(self, method, session=None, timeout=60.0, **params):
+        self.next_id += 1
+        msg = {"id": self.next_id, "method": method, "params": params}
+        if session:
+            msg["sessionId"] = session
+        os.write(self.send_fd, json.dumps(msg).encode() + b"\0")
+        deadline = time.monotonic() + timeout
+        while True:
+            reply = self._message(deadline)
+            if reply.get("id") == self.next_id:
+                assert "error" not in reply, reply["error"]
+                return reply["result"]
+            self.events.append(reply)
+
+    def wait_for(self, method, timeout=60.0):
+        deadline = time.monotonic() + timeout
+        while True:
+            for i, e in enumerate(self.events):
+                if e.get("method") == method:
+                    return self.events.pop(i)
+            self.events.append(self._message(deadline))
+
+    def open(self, url):
+        target = self.call("Target.createTarget", url="about:blank")["targetId"]
+        session = self.call("Target.attachToTarget", targetId=target, flatten=True)["sessionId"]
+        for domain in ("Page", "Network", "Runtime"):
+            self.call(f"{domain}.enable", session=session)
+        self.call("Page.navigate", session=session, url=url)
+        self.wait_for("Page.loadEventFired")
+        return session
+
+    def screenshot(self, session):
+        data = self.call("Page.captureScreenshot", session=session, format="png")["data"]
+        png = base64.b64decode(data)
+        return png, np.asarray(Image.open(io.BytesIO(png)).convert("RGB")).astype(float)
+
+    def text(self, session, element_id):
+        expr = f"document.getElementById({element_id!r}).textContent"
+        res = self.call("Runtime.evaluate", session=session, expression=expr, returnByValue=True)
+        return res["result"]["value"]
+
+    def close(self):
+        try:
+            self.call("Browser.close", timeout=10)
+        except (AssertionError, RuntimeError, TimeoutError, OSError):
+            pass
+        try:
+            self.proc.wait(10)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait(10)
+        for fd in (self.send_fd, self.recv_fd):
+            os.close(fd)
+        shutil.rmtree(self.profile, ignore_errors=True)
+
+
+@pytest.fixture(scope="module")
+def chromium():
+    if CHROMIUM is None:
+        if os.environ.get("CI"):
+            pytest.fail("chromium is not installed; .ci/run installs the Debian package")
+        pytest.skip("chromium is not installed (apt-get install chromium)")
+    browser = _Chromium()
+    yield browser
+    browser.close()
+
+
+def test_exported_html_plays_in_a_browser(chromium, walk, tmp_path, capsys):
+    path, _, _ = walk
+    out = tmp_path / "replay.html"
+    assert main(["replay", str(path), "--html", str(out)]) == 0
+    assert "wrote" in capsys.readouterr().out
+    session = chromium.open(out.as_uri())
+    time.sleep(1.0)
+    png1, a = chromium.screenshot(session)
+    time.sleep(1.5)
+    png2, b = chromium.screenshot(session)
+    shots = Path(os.environ.get("STRATAWALK_SCREENSHOTS", tmp_path))
+    shots.mkdir(parents=True, exist_ok=True)
+    (shots / "replay_1.png").write_bytes(png1)
+    (shots / "replay_2.png").write_bytes(png2)
+    # a rendered 3-D scene, not a blank canvas: the picture above the control bar varies
+    scene_a, scene_b = a[100:-60], b[100:-60]
+    assert scene_a.std() > 20 and scene_b.std() > 20
+    assert len(np.unique(scene_a.reshape(-1, 3) // 16, axis=0)) > 30  # many colours
+    # ... and it moves as the animation plays
+    changed = np.abs(scene_a - scene_b).sum(axis=-1) > 30
+    assert changed.mean() > 0.002, changed.mean()
+    assert chromium.text(session, "sw-stratum").startswith("S")
+    # nothing was fetched from the network, and no script failed
+    urls = [e["params"]["request"]["url"] for e in chromium.events
+            if e.get("method") == "Network.requestWillBeSent"]  # fmt: skip
+    assert urls and all(u.split(":", 1)[0] in ("file", "data", "about", "blob") for u in urls), urls
+    errors = [e for e in chromium.events if e.get("method") == "Runtime.exceptionThrown"]
+    assert errors == []
+
+
+def test_live_server_on_loopback_in_a_browser(chromium, scene, tmp_path):
+    with ReplayServer() as server:
+        assert server.url.startswith("http://127.0.0.1:")
+        server.show(scene)
+        # every socket the server listens on is bound to 127.0.0.1
+        listening = _listening_addresses(server.proc.pid)
+        assert len(listening) >= 2 and all(ip == "127.0.0.1" for ip, _ in listening), listening
+        page = urllib.request.urlopen(server.url, timeout=10).read().decode()
+        assert "MeshCat.Viewer" in page and "viewer.connect()" in page
+        session = chromium.open(server.url)
+        time.sleep(2.0)
+        png, img = chromium.screenshot(session)
+        (tmp_path / "live.png").write_bytes(png)
+        assert img[50:-50].std() > 20  # the scene arrived over the websocket and rendered
+
+
+def _listening_addresses(pid):
+    """(ip, port) of the TCP sockets process ``pid`` listens on (from /proc)."""
+    inodes = set()
+    for fd in os.listdir(f"/proc/{pid}/fd"):
+        try:
+            link = os.readlink(f"/proc/{pid}/fd/{fd}")
+        except OSError:
+            continue
+        if link.startswith("socket:["):
+            inodes.add(link[8:-1])
+    out = []
+    for table, v6 in (("/proc/net/tcp", False), ("/proc/net/tcp6", True)):
+        for line in Path(table).read_text().splitlines()[1:]:
+            f = line.split()
+            if f[9] in inodes and f[3] == "0A":  # 0A: LISTEN
+                hexip, port = f[1].split(":")
+                raw = bytes.fromhex(hexip)
+                if v6:
+                    ip = ":".join(raw[i : i + 4][::-1].hex() for i in range(0, 16, 4))
+                else:
+                    ip = ".".join(str(x) for x in raw[::-1])
+                out.append((ip, int(port, 16)))
+    return out
+
+
+# ---------------------------------------------------------------------------- the command
+def test_replay_serves_on_loopback_for_a_while(walk, capsys):
+    path, _, _ = walk
+    assert main(["replay", str(path), "--seconds", "0.2"]) == 0
+    out = capsys.readouterr().out
+    assert re.search(r"open http://127\.0\.0\.1:\d+/static/", out), out
+
+
+def test_replay_refuses_a_remote_host_unless_allowed(walk, capsys):
+    path, _, _ = walk
+    for host in ("0.0.0.0", "192.168.1.20", "example.org", "::"):
+        assert main(["replay", str(path), "--host", host, "--seconds", "0"]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.count("\n") == 0 and "--allow-remote" in err and host in err, err
+    assert check_host("127.0.0.1") == "127.0.0.1"
+    assert check_host("127.0.0.2") == "127.0.0.2"
+    assert check_host("::1") == "::1"
+    assert check_host("localhost") == "127.0.0.1"
+    assert check_host("0.0.0.0", allow_remote=True) == "0.0.0.0"
+    with pytest.raises(InputError):
+        ReplayServer(host="10.0.0.1")
+
+
+@pytest.mark.parametrize("command", ["replay", "plot"])
+def test_bad_plan_file_is_one_line_error(command, tmp_path, capsys):
+    cases = {
+        "not_json.json": ("{ this is not json", "not JSON"),
+        "other_format.json": (json.dumps({"format": "something/2"}), "stratawalk.plan/1"),
+        "missing.json": (None, "no such file"),
+    }
+    for name, (text, expect) in cases.items():
+        path = tmp_path / name
+        if text is not None:
+            path.write_text(text)
+        args = [command, str(path)] + (["--html", str(tmp_path / "x.html")] if command == "replay"
+                                       else ["--out", str(tmp_path / "plots")])  # fmt: skip
+        assert main(args) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.count("\n") == 0 and name in err and expect in err, err
+    assert not (tmp_path / "x.html").exists() and not (tmp_path / "plots").exists()

@@ -1,0 +1,185 @@
+import json
+
+import numpy as np
+import pytest
+
+from planner.cli import main
+from planner.execution import (
+    Measurement,
+    SimulatedMocap,
+    run_corrected,
+    run_feedback,
+    shift_body,
+)
+from planner.plan import Plan, Samples
+from planner.simulate import (
+    SimSettings,
+    Simulator,
+    cycle_starts,
+    run_open_loop,
+    terrain_model,
+)
+from planner.terrain import load_terrain
+from planner.walk import plan_walk
+
+
+@pytest.fixture(scope="module")
+def short_plan():
+    """0.35 m on flat: 12 gait steps, 23 s of plan."""
+    plan, report = plan_walk("littledog", "flat", goal_xy=(0.55, 0.0))
+    assert plan.outcome["reached_goal"] and report.ok
+    return plan
+
+
+@pytest.fixture(scope="module")
+def open_loop(short_plan):
+    return run_open_loop(short_plan)
+
+
+def first_cycles(plan: Plan, n: int) -> Plan:
+    """The plan cut after its first n cycles (gait steps)."""
+    end = cycle_starts(plan.samples.contact)[n] + 1
+    out = Plan.from_dict(plan.to_dict(), source=plan.source)
+    s = plan.samples
+    out.samples = Samples(s.time[:end].copy(), s.q[:end].copy(), s.contact[:end].copy())
+    return out
+
+
+def test_terrain_becomes_plane_boxes_or_height_field():
+    def model(name):
+        t = load_terrain(name)
+        origin, res, h = t.height_grid(0.0, 1.5, -0.3, 0.3, 0.005)
+        from planner.plan import TerrainGrid
+
+        return terrain_model(TerrainGrid(np.array(origin), res, h), t)
+
+    assert model("flat").kind == "plane"
+    step = model("step5cm")
+    assert step.kind == "boxes" and len(step.geoms) == 2
+    # the edge is placed exactly (x = 0.8), not to within half a grid cell
+    lower = step.geoms[0]
+    x_c, half = float(lower["pos"].split()[0]), float(lower["size"].split()[0])
+    assert x_c + half == pytest.approx(0.8, abs=1e-6)
+    assert float(step.geoms[1]["pos"].split()[2]) + float(step.geoms[1]["size"].split()[2]) == (
+        pytest.approx(0.05)
+    )
+    assert model("rough2cm").kind == "hfield"
+    assert model("slope10").kind == "hfield"
+
+
+def test_standing_robot_carries_its_weight_without_creeping(short_plan):
+    plan = short_plan
+    sim = Simulator(plan.load_robot(), plan.terrain_grid, plan.friction, plan.load_terrain())
+    sim.settle(plan.samples.q[0], 1.0)
+    feet0 = sim.foot_centres_W()
+    for _ in range(int(2.0 / sim.settings.control_dt_s)):
+        sim.tick()
+    touch = sim.touches()
+    assert touch.feet.all() and not touch.body and not touch.legs
+    weight = plan.load_robot().total_mass_kg * 9.81
+    assert touch.forces[:, 2].sum() == pytest.approx(weight, rel=0.03)
+    assert np.abs(sim.foot_centres_W() - feet0).max() < 2e-4  # no soft-contact creep
+    # the servos hold the planned pose to a few millimetres
+    assert np.linalg.norm(sim.q()[:3] - plan.samples.q[0, :3]) < 0.005
+    assert np.abs(sim.joints() - sim.targets()).max() < np.radians(3)
+
+
+def test_open_loop_short_flat_walk_reaches_without_falling(short_plan, open_loop):
+    m = open_loop.metrics
+    n = len(short_plan.samples)
+    assert m.reached and m.final_error_m < 0.05, m.summary()
+    assert not m.fell and not m.tipped and not m.body_contact, m.summary()
+    assert m.max_sliding_m < 0.01 and m.max_tilt_error_deg < 5.0, m.summary()
+    assert m.ok and m.cycles == len(set(cycle_starts(short_plan.samples.contact)) - {n - 1})
+    assert m.saturation_frac < 0.05  # the 0.6 N m knees are enough for this walk
+
+
+def test_executed_motion_is_a_plan_file(open_loop, tmp_path):
+    path = open_loop.executed.save(tmp_path / "sim.json")
+    back = Plan.load(path)
+    s = back.samples
+    assert s.q.shape[1] == 19 and len(s) > 100
+    assert s.time[-1] == pytest.approx(open_loop.metrics.sim_time_s, abs=0.1)
+    assert s.contact.all(axis=1).mean() > 0.3 and (s.contact.sum(axis=1) >= 3).mean() > 0.95
+    assert len(back.keyframes) == open_loop.metrics.cycles
+    assert back.stats["simulation"]["mode"] == "open loop"
+    kf = back.keyframes[0]
+    assert kf.forces[:, 2].sum() == pytest.approx(3.004 * 9.81, rel=0.05)
+
+
+def test_body_moved_outside_its_support_tips_the_robot(short_plan):
+    # 5 cm to the left: when a left leg lifts, the COM is outside the other three feet
+    bad = shift_body(first_cycles(short_plan, 3), [0.0, 0.05, 0.0])
+    m = run_open_loop(bad).metrics
+    assert not m.ok
+    assert m.tipped and m.max_tilt_error_deg > 15.0, m.summary()
+    assert m.fell or m.swing_touch_s > 0.0 or m.slipped, m.summary()
+    assert "tipped" in m.message or "fell" in m.message
+
+
+def test_precompute_then_correct_tracks_the_plan_end(short_plan, open_loop):
+    res = run_corrected(short_plan)
+    m = res.metrics
+    assert m.ok and m.ik_misses == 0, m.summary()
+    assert m.final_error_m < 0.02 and m.final_error_m < open_loop.metrics.final_error_m
+
+
+def test_feedback_replans_from_noisy_late_measurements(short_plan):
+    # six cycles of re-planning from mocap with 1 mm / 0.1 deg noise and 20 ms latency
+    res = run_feedback(
+        short_plan,
+        max_cycles=6,
+        position_noise_m=0.001,
+        angle_noise_rad=0.002,
+        latency_s=0.02,
+        seed=1,
+    )
+    m = res.metrics
+    assert m.cycles == 6 and res.executed.stats["feedback"]["steps"] >= 5, m.summary()
+    assert not (m.fell or m.tipped or m.slipped or m.body_contact), m.summary()
+    assert m.com_to_goal_m < 0.35 - 0.1  # the COM came at least 10 cm closer to the goal
+    assert "max_cycles" in m.message
+
+
+def test_mocap_noise_and_latency(short_plan):
+    plan = first_cycles(short_plan, 1)
+    sim = Simulator(plan.load_robot(), plan.terrain_grid, plan.friction)
+    sim.settle(plan.samples.q[0], 0.2)
+    mocap = SimulatedMocap(sim, position_noise_m=0.002, latency_s=0.05, seed=3)
+    for _ in range(50):
+        sim.tick()
+    meas = mocap.measure()
+    assert isinstance(meas, Measurement) and meas.contact.all()
+    assert sim.time - meas.time_s == pytest.approx(0.05, abs=sim.settings.control_dt_s)
+    assert 0 < np.linalg.norm(meas.q[:3] - sim.q()[:3]) < 0.02
+    with pytest.raises(ValueError, match="latency_s"):
+        SimulatedMocap(sim, latency_s=-1.0)
+
+
+def test_cli_simulate_writes_the_executed_motion(short_plan, tmp_path, capsys):
+    src = first_cycles(short_plan, 2).save(tmp_path / "plan.json")
+    out = tmp_path / "sim.json"
+    rc = main(["simulate", str(src), "--time-scale", "3", "--out", str(out)])
+    text = capsys.readouterr().out
+    assert rc == 0, text
+    assert "mode open loop: OK" in text and "max stance-foot slip" in text
+    sim = json.loads(out.read_text())
+    assert sim["format"] == "stratawalk.plan/1"
+    assert sim["stats"]["settings"]["time_scale"] == 3.0
+
+
+@pytest.mark.parametrize(
+    "content, expect",
+    [("hello, not a plan\n", "not JSON"), ('{"a": 1}', "format")],
+)
+def test_cli_simulate_bad_input_is_one_line_error(tmp_path, capsys, content, expect):
+    bad = tmp_path / "bad.json"
+    bad.write_text(content)
+    assert main(["simulate", str(bad)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "bad.json" in err and expect in err
+
+
+def test_settings_are_checked():
+    with pytest.raises(ValueError, match="time_scale"):
+        SimSettings(time_scale=0.0).check()
