@@ -163,9 +163,7 @@ class Robot:
         """Points of P kept delta_c above the terrain: its 8 vertices and bottom-face grid."""
         pts = getattr(self, "_clearance_points_B", None)
         if pts is None:
-            pts = np.unique(
-                np.vstack([self.body_vertices_B, self.body_bottom_points_B()]), axis=0
-            )
+            pts = np.unique(np.vstack([self.body_vertices_B, self.body_bottom_points_B()]), axis=0)
             self._clearance_points_B = pts
         return pts
 
