@@ -8,8 +8,8 @@ paper's free choice of the decreasing h_m made h_m(d) = exp(-d^2 / (2 l^2)), l =
 ``target_length_m`` (closeness to the target foothold of Lambda_t), sigma2 = 1 - g^.n
 (flat ground), sigma3 as in :func:`~planner.problems.base.sigma3_ca`; as a sum of logs.
 
-For the recursive planner of 8.5 the ambition parameter rho_3 scales the target's
-distance; see :mod:`planner.local.recursive`.
+For the recursive planner of 8.5 the ambition rho_3 scales the stride of the target
+(:mod:`planner.local.recursive`); the problem itself is unchanged.
 """
 
 from __future__ import annotations
