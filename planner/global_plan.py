@@ -55,15 +55,15 @@ from pathlib import Path
 import numpy as np
 
 from planner.errors import InputError, NoSolutionFound, PlannerError
-from planner.local.base import LocalPlan, LocalSettings
+from planner.local.base import LocalSettings
 from planner.trajectory import Trajectory
+from planner.walk import assemble_plan
 
 __all__ = [
     "CostWeights",
     "Evaluation",
     "GlobalResult",
     "GlobalSettings",
-    "assemble_plan",
     "candidate_trajectory",
     "lateral_coefficients",
     "plan_global_walk",
@@ -253,47 +253,6 @@ def trajectory_cost(
         "stability": w.margin_per_m * max(0.0, w.margin_ref_m - margin),
     }
     return float(sum(terms.values())), terms
-
-
-# ---- plan assembly (as planner.walk.plan_walk, for a given local plan) ---------------------
-def assemble_plan(robot, terrain, mu, start_xy, goal_xy, result: LocalPlan, stats: dict):
-    """The ``stratawalk.plan/1`` plan of a local plan; validated as in ``plan_walk``.
-
-    Returns (plan, report); a plan the validator rejects is not reported as reaching.
-    """
-    from planner.plan import Plan
-    from planner.validate import check_plan
-
-    def lift(xy):
-        x, y = float(xy[0]), float(xy[1])
-        return np.array([x, y, float(terrain.height(np.array(x), np.array(y)))])
-
-    outcome = {
-        "reached_goal": bool(result.reached_goal),
-        "distance_to_goal": float(result.distance_to_goal_m),
-        "message": result.message,
-    }
-    plan = Plan.build(
-        robot,
-        terrain,
-        mu,
-        lift(start_xy),
-        lift(goal_xy),
-        result.keyframes,
-        result.samples,
-        result.times,
-        outcome,
-        dict(result.stats, **stats),
-    )
-    report = check_plan(plan)
-    plan.stats["validation"] = {"ok": report.ok, "violations": report.by_kind()}
-    if not report.ok and plan.outcome["reached_goal"]:
-        plan.outcome["reached_goal"] = False
-        plan.outcome["message"] += (
-            f"; NOT reported as reached: the validator found {len(report.violations)} "
-            f"violations ({', '.join(report.by_kind())})"
-        )
-    return plan, report
 
 
 # ---- evaluation in worker processes --------------------------------------------------------

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from planner.local.base import LocalSettings
+from planner.local.base import LocalPlan, LocalSettings
 from planner.local.hard import HardPlanner
 from planner.local.recursive import RecursivePlanner
 from planner.local.soft import SoftPlanner
@@ -44,29 +44,36 @@ def plan_walk(
     terrain = load_terrain(terrain) if isinstance(terrain, str) else terrain
     local = PLANNERS[planner](robot, terrain, settings=settings)
     result = local.plan(start_xy, goal_xy, progress=progress)
-    start = np.array(
-        [*start_xy[:2], float(terrain.height(np.array(start_xy[0]), np.array(start_xy[1])))]
-    )
-    goal = np.array(
-        [*goal_xy[:2], float(terrain.height(np.array(goal_xy[0]), np.array(goal_xy[1])))]
-    )
+    return assemble_plan(robot, terrain, local.mu, start_xy, goal_xy, result, {"planner": planner})
+
+
+def assemble_plan(robot, terrain, mu, start_xy, goal_xy, result: LocalPlan, stats: dict):
+    """The ``stratawalk.plan/1`` plan of a local plan, validated; returns (plan, report).
+
+    ``stats`` are added to the local plan's. A plan the validator rejects is not reported
+    as reaching the goal, whatever the local planner said.
+    """
+
+    def lift(xy):
+        x, y = float(xy[0]), float(xy[1])
+        return np.array([x, y, float(terrain.height(np.array(x), np.array(y)))])
+
     outcome = {
         "reached_goal": bool(result.reached_goal),
         "distance_to_goal": float(result.distance_to_goal_m),
         "message": result.message,
     }
-    stats = dict(result.stats, planner=planner)
     plan = Plan.build(
         robot,
         terrain,
-        local.mu,
-        start,
-        goal,
+        mu,
+        lift(start_xy),
+        lift(goal_xy),
         result.keyframes,
         result.samples,
         result.times,
         outcome,
-        stats,
+        dict(result.stats, **stats),
     )
     report = check_plan(plan)
     plan.stats["validation"] = {"ok": report.ok, "violations": report.by_kind()}

@@ -5,29 +5,20 @@ import pytest
 from PIL import Image
 
 from planner.cli import main
-from planner.local.soft import LocalSettings
-from planner.plan import Plan
 from planner.plots import (
     FIGURES,
     LEG_NAMES,
     cone_margin,
     fig_gait,
-    plan_series,
     stance_segments,
 )
 from planner.robot import LEG_NAMES as ROBOT_LEG_NAMES
 from planner.statics import GRAVITY_W
-from planner.walk import plan_walk
 
 
 @pytest.fixture(scope="module")
-def walk(tmp_path_factory):
-    """A short validated walk on flat ground, saved, and its series."""
-    plan, report = plan_walk("littledog", "flat", (0.3, 0.0), (0.2, 0.0), "soft", LocalSettings())
-    assert report.ok, report.summary()
-    path = plan.save(tmp_path_factory.mktemp("plots") / "plan.json")
-    plan = Plan.load(path)
-    return path, plan, plan_series(plan)
+def walk(short_flat_walk):
+    return short_flat_walk
 
 
 def test_series_matches_the_plan(walk):

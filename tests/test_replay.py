@@ -21,23 +21,14 @@ from PIL import Image
 
 from planner.cli import main
 from planner.errors import InputError
-from planner.local.soft import LocalSettings
-from planner.plan import Plan
-from planner.plots import plan_series
 from planner.replay import ReplayServer, build_scene, check_host, scene_html
-from planner.walk import plan_walk
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 
 
 @pytest.fixture(scope="module")
-def walk(tmp_path_factory):
-    """A short validated walk on flat ground (two crawl steps), saved to a file."""
-    plan, report = plan_walk("littledog", "flat", (0.3, 0.0), (0.2, 0.0), "soft", LocalSettings())
-    assert report.ok, report.summary()
-    path = plan.save(tmp_path_factory.mktemp("replay") / "plan.json")
-    plan = Plan.load(path)
-    return path, plan, plan_series(plan)
+def walk(short_flat_walk):
+    return short_flat_walk
 
 
 @pytest.fixture(scope="module")

@@ -176,6 +176,7 @@ class LocalPlanner:
         self.failures: list[dict] = []  # every failed step attempt, for the plan's stats
         self.extra_stats: dict = {}
         self.check = ConstraintCheck(robot, terrain, self.settings.theta)
+        self._bottom_B = robot.body_bottom_points_B(spacing_m=0.005, rows=5)  # path checks
 
     # ---- problems, built once per support pattern / leg --------------------------------
     def theta2(self, support) -> Theta2:
@@ -349,7 +350,7 @@ class LocalPlanner:
             if not s.info.get("ik_ok", True):
                 legs = ", ".join(LEG_NAMES[i] for i in s.info.get("unreachable_legs", []))
                 return f"sample {k} of the path leaves the reach of {legs or 'a leg'}"
-        pts_B = self.robot.body_bottom_points_B(spacing_m=0.005, rows=5)
+        pts_B = self._bottom_B
         for k, s in enumerate(path):
             pts = pts_B @ s.base_rotation_W.T + s.base_position_W
             gap = pts[:, 2] - np.asarray(self.terrain.height_sharp(pts[:, 0], pts[:, 1]))
@@ -424,7 +425,6 @@ class LocalPlanner:
         if tau is None:
             tau = Trajectory.straight(start_xy, goal_xy, self.terrain, self.com_height_m())
         state = start_state if start_state is not None else self.initial_state(start_xy, tau)
-        self.check = ConstraintCheck(self.robot, self.terrain, self.settings.theta)
         run = _Run(np.asarray(goal_xy, float)[:2], tau, t_begin, progress)
         walk = Walk(self, state)
         try:
