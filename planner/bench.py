@@ -348,7 +348,7 @@ def solve_ipopt(
     sol = problem.solve_packed(p, x0)
     worst = sol.max_violation()
     group = max(sol.violations, key=sol.violations.get) if sol.violations else ""
-    solver_side = max(problem.solver_violations(sol.x, p).values(), default=0.0)
+    solver_side = max(problem.solver_violations(sol.x, sol.p).values(), default=0.0)
     return SolveRecord(
         solver="ipopt",
         feasible=bool(sol.feasible),
@@ -422,42 +422,49 @@ def solve_slsqp(
     numerically; equality rows (lbg == ubg) become one ``'eq'`` constraint, the finite
     sides of the others one ``'ineq'`` constraint (g - lbg >= 0, ubg - g >= 0); bounds
     lbx/ubx; the start point clipped to the bounds as IPOPT's. Feasibility is judged by
-    the problem's independent check, as for IPOPT. Time = the ``minimize`` call.
+    the problem's independent check, as for IPOPT. The same constraint generation as
+    IPOPT's (:meth:`~planner.problems.base.ThetaProblem.solve_rounds`: clearance points
+    picked at the start pose, a round more if the check finds P too low). Time = the
+    rounds without the independent checks, as for IPOPT.
     """
     from scipy.optimize import Bounds, minimize
 
     _prepare(problem, context)
-    nlp = _NumericNLP(problem, p)
-    x_start = np.clip(np.asarray(x0, float), problem.lbx, problem.ubx)
-    t0 = time.perf_counter()
-    with warnings.catch_warnings(), np.errstate(all="ignore"):
-        warnings.simplefilter("ignore")
-        res = minimize(
-            nlp.f,
-            x_start,
-            method="SLSQP",
-            jac=None,
-            bounds=Bounds(problem.lbx, problem.ubx),
-            constraints=nlp.constraints(),
-            options={"maxiter": maxiter, "ftol": ftol},
-        )
-    elapsed = time.perf_counter() - t0
-    x = np.asarray(res.x, float)
+    bounds = Bounds(problem.lbx, problem.ubx)
+    found = {}
+
+    def inner(p_round: np.ndarray, x_start: np.ndarray) -> tuple[np.ndarray, str, int]:
+        nlp = _NumericNLP(problem, p_round)
+        with warnings.catch_warnings(), np.errstate(all="ignore"):
+            warnings.simplefilter("ignore")
+            res = minimize(
+                nlp.f,
+                x_start,
+                method="SLSQP",
+                jac=None,
+                bounds=bounds,
+                constraints=nlp.constraints(),
+                options={"maxiter": maxiter, "ftol": ftol},
+            )
+        found.update(success=bool(res.success), fun=float(res.fun))
+        return np.asarray(res.x, float), str(res.message), int(res.nit)
+
+    x, p_used, status, iterations, _, _, elapsed = problem.solve_rounds(p, x0, inner)
     if np.all(np.isfinite(x)):
-        worst, group, solver_side = _judge(problem, x, p)
+        worst, group, solver_side = _judge(problem, x, p_used)
     else:
         worst, group, solver_side = float("inf"), "nan", float("inf")
     feasible = bool(np.isfinite(worst) and worst <= FEASIBILITY_TOL)
     return SolveRecord(
         solver="slsqp",
         feasible=feasible,
-        converged=bool(res.success and solver_side <= 1e-6),
+        converged=bool(found["success"] and solver_side <= 1e-6),
         max_violation=worst,
         worst_group=group,
         solve_time_s=elapsed,
-        iterations=int(res.nit),
-        status=str(res.message),
-        objective=float(res.fun) if np.isfinite(res.fun) else float("inf"),
+        iterations=iterations,
+        status=status,
+        objective=found["fun"] if np.isfinite(found["fun"]) else float("inf"),
         x=x,
     )
 

