@@ -21,7 +21,7 @@ test: $(STAMP)
 # Theta1-4: IPOPT (exact derivatives) vs SLSQP (finite differences); ~4 min on 2 cores
 # courses: LittleDog x 9 courses x soft/recursive, 2 m walks, 60 s budget; ~15 min on 2 cores
 bench: $(STAMP)
-	$(VENV)/bin/stratawalk bench theta
+	$(VENV)/bin/stratawalk bench theta --jit
 	$(VENV)/bin/stratawalk bench courses
 
 lint: $(STAMP)

@@ -42,14 +42,14 @@ import subprocess
 import sys
 import time
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from planner.problems import Theta1, Theta2, Theta3, Theta4
-from planner.problems.base import FEASIBILITY_TOL, ThetaProblem
+from planner.problems.base import FEASIBILITY_TOL, ThetaOptions, ThetaProblem
 from planner.state import State
 
 __all__ = [
@@ -78,26 +78,35 @@ TARGETS = {"Theta2_median_ms": 5.0, "Theta3_median_ms": 3.0, "speed_ratio": 20.0
 class ProblemCache:
     """Theta problems built once per (robot, terrain, kind, support or leg), with build times."""
 
-    def __init__(self) -> None:
+    def __init__(self, options: ThetaOptions | None = None) -> None:
         self._problems: dict[tuple, ThetaProblem] = {}
+        self.options = options
 
     def get(self, robot, terrain, theta: str, key: Any = None) -> ThetaProblem:
         """The problem ``theta`` for ``key`` (support tuple or swing leg), built on first use."""
         k = (id(robot), terrain.name, theta, key)
         if k not in self._problems:
             mu = _friction(terrain)
+            o = self.options
             if theta == "Theta1":
-                prob = Theta1(robot, terrain, support=key, mu=mu)
+                prob = Theta1(robot, terrain, support=key, options=o, mu=mu)
             elif theta == "Theta2":
-                prob = Theta2(robot, terrain, support=key, mu=mu)
+                prob = Theta2(robot, terrain, support=key, options=o, mu=mu)
             elif theta == "Theta3":
-                prob = Theta3(robot, terrain, leg=key, mu=mu)
+                prob = Theta3(robot, terrain, leg=key, options=o, mu=mu)
             elif theta == "Theta4":
-                prob = Theta4(robot, terrain, mu=mu)
+                prob = Theta4(robot, terrain, options=o, mu=mu)
             else:
                 raise ValueError(f"unknown problem {theta!r}; expected one of {THETAS}")
             self._problems[k] = prob
         return self._problems[k]
+
+    def twin(self, robot, terrain, problem: ThetaProblem, other: ProblemCache) -> ThetaProblem:
+        """The problem of ``other`` built for the same (terrain, Theta, key) as ``problem``."""
+        for k, prob in other._problems.items():
+            if prob is problem:
+                return self.get(robot, terrain, k[2], k[3])
+        raise KeyError(f"{problem.name} was not built by that cache")
 
     def build_times(self) -> list[dict[str, Any]]:
         """One record per built problem: terrain, problem, key, build time [s]."""
@@ -585,6 +594,7 @@ def run_theta_bench(
     robot_name: str = "littledog",
     thetas: tuple[str, ...] = THETAS,
     progress: bool = True,
+    jit: bool = False,
 ) -> dict[str, Any]:
     """Run the Theta benchmark and write ``theta.json`` and ``theta.md`` to ``out_dir``.
 
@@ -607,6 +617,9 @@ def run_theta_bench(
         Which programs.
     progress : bool
         Print one line per (Theta, terrain) to stderr.
+    jit : bool
+        Also solve every instance with the NLP compiled to C (solver ``ipopt+C``,
+        :mod:`planner.problems.compiled`; compiled once per problem and machine, cached).
 
     Returns
     -------
@@ -621,6 +634,8 @@ def run_theta_bench(
     machine = _machine()
     robot = load_robot(robot_name)
     cache = ProblemCache()
+    compiled = ProblemCache(ThetaOptions(jit=True)) if jit else None
+    ipopts = ("ipopt", "ipopt+C") if jit else ("ipopt",)
     groups: list[dict[str, Any]] = []
     per_instance: list[dict[str, Any]] = []
     pooled: dict[str, dict[str, list[SolveRecord]]] = {}
@@ -639,46 +654,63 @@ def run_theta_bench(
             else:
                 pick = np.random.default_rng(seed + 7).choice(m, slsqp_n, replace=False)
                 sl_idx = sorted(int(k) for k in pick)
+            twins = [
+                compiled.twin(robot, terrain, inst.problem, cache) if compiled else None
+                for inst in instances
+            ]
             _warm_up(instances)
-            ip: list[SolveRecord] = []
+            if compiled:
+                pairs = zip(instances, twins, strict=True)
+                _warm_up([replace(inst, problem=tw) for inst, tw in pairs])
+            recs: dict[str, list[SolveRecord]] = {solver: [] for solver in ipopts}
             sl: dict[int, SolveRecord] = {}
             in_subset = set(sl_idx)
-            for k, inst in enumerate(instances):  # interleaved: both see the same machine load
-                ip.append(solve_ipopt(inst.problem, inst.p, inst.x0, inst.context))
+            for k, inst in enumerate(instances):  # interleaved: all see the same machine load
+                recs["ipopt"].append(solve_ipopt(inst.problem, inst.p, inst.x0, inst.context))
+                if compiled:
+                    recs["ipopt+C"].append(solve_ipopt(twins[k], inst.p, inst.x0, inst.context))
                 if k in in_subset:
                     sl[k] = solve_slsqp(inst.problem, inst.p, inst.x0, inst.context)
-            per_instance.append(_records_json(theta, tname, "ipopt", list(range(m)), ip))
-            per_instance.append(
-                _records_json(theta, tname, "slsqp", sl_idx, [sl[k] for k in sl_idx])
-            )
-            ip_common = [ip[k] for k in sl_idx]
             sl_list = [sl[k] for k in sl_idx]
-            ratio = _speed_ratio(ip_common, sl_list)
-            for solver, recs in (("ipopt", ip), ("slsqp", sl_list)):
-                row = {"theta": theta, "terrain": tname, "solver": solver} | _stats(recs)
-                row["speed_ratio"] = ratio
+            for solver in ipopts:
+                per_instance.append(
+                    _records_json(theta, tname, solver, list(range(m)), recs[solver])
+                )
+            per_instance.append(_records_json(theta, tname, "slsqp", sl_idx, sl_list))
+            pool = pooled.setdefault(theta, {"slsqp": []})
+            for solver in ipopts:
+                common = [recs[solver][k] for k in sl_idx]
+                row = {"theta": theta, "terrain": tname, "solver": solver} | _stats(recs[solver])
+                row["speed_ratio"] = _speed_ratio(common, sl_list)
                 groups.append(row)
-            pool = pooled.setdefault(theta, {"ipopt": [], "ipopt_common": [], "slsqp": []})
-            pool["ipopt"] += ip
-            pool["ipopt_common"] += ip_common
+                pool.setdefault(solver, []).extend(recs[solver])
+                pool.setdefault(solver + "/common", []).extend(common)
+            row = {"theta": theta, "terrain": tname, "solver": "slsqp"} | _stats(sl_list)
+            groups.append(row | {"speed_ratio": groups[-len(ipopts)]["speed_ratio"]})
             pool["slsqp"] += sl_list
             if progress:
-                s_ip, s_sl = _stats(ip), _stats(sl_list)
+                s_sl = _stats(sl_list)
+                ips = " | ".join(
+                    f"{solver} {_stats(recs[solver])['success_rate']:.0%} "
+                    f"{_stats(recs[solver])['time_ms_median']:.2f} ms"
+                    for solver in ipopts
+                )
                 print(
-                    f"[bench] {theta:6s} {tname:9s} n={m}: ipopt {s_ip['success_rate']:.0%} "
-                    f"{s_ip['time_ms_median']:.2f} ms | slsqp (n={len(sl_list)}) "
+                    f"[bench] {theta:6s} {tname:9s} n={m}: {ips} | slsqp (n={len(sl_list)}) "
                     f"{s_sl.get('success_rate', 0):.0%} {s_sl.get('time_ms_median', 0):.1f} ms"
-                    f" | x{ratio:.0f}  [{time.perf_counter() - t_start:.0f} s]",
+                    f" | x{groups[-1 - len(ipopts)]['speed_ratio']:.0f}"
+                    f"  [{time.perf_counter() - t_start:.0f} s]",
                     file=sys.stderr,
                     flush=True,
                 )
     summary = []
     for theta, pool in pooled.items():
-        ratio = _speed_ratio(pool["ipopt_common"], pool["slsqp"])
-        for solver in ("ipopt", "slsqp"):
+        for solver in ipopts:
             row = {"theta": theta, "terrain": "all", "solver": solver} | _stats(pool[solver])
-            row["speed_ratio"] = ratio
+            row["speed_ratio"] = _speed_ratio(pool[solver + "/common"], pool["slsqp"])
             summary.append(row)
+        row = {"theta": theta, "terrain": "all", "solver": "slsqp"} | _stats(pool["slsqp"])
+        summary.append(row | {"speed_ratio": summary[-len(ipopts)]["speed_ratio"]})
     result = {
         "format": "stratawalk.bench.theta/1",
         "robot": robot_name,
@@ -686,6 +718,7 @@ def run_theta_bench(
         "config": {
             "n_per_theta": n_per_theta,
             "slsqp_n": slsqp_n,
+            "compiled": jit,
             "seed": seed,
             "feasibility_tol": FEASIBILITY_TOL,
             "slsqp_options": {"maxiter": 200, "ftol": 1e-9, "jac": None},
@@ -694,7 +727,8 @@ def run_theta_bench(
         "groups": groups,
         "summary": summary,
         "targets": _targets(summary),
-        "build_times_s": cache.build_times(),
+        "build_times_s": cache.build_times()
+        + [b | {"theta": b["theta"] + " (C)"} for b in (compiled.build_times() if jit else [])],
         "instance_generation_s": gen_time,
         "total_time_s": time.perf_counter() - t_start,
         "instances": per_instance,
@@ -719,23 +753,26 @@ def _warm_up(instances: list[Instance]) -> None:
 def _targets(summary: list[dict[str, Any]]) -> dict[str, Any]:
     rows = {(r["theta"], r["solver"]): r for r in summary}
     out: dict[str, Any] = {}
-    for theta, key in (("Theta2", "Theta2_median_ms"), ("Theta3", "Theta3_median_ms")):
-        if (theta, "ipopt") in rows:
-            med = rows[(theta, "ipopt")]["time_ms_median"]
-            out[key] = {"target": TARGETS[key], "measured": med, "met": med < TARGETS[key]}
-    for theta in THETAS:
-        if (theta, "ipopt") in rows and rows[(theta, "slsqp")]["instances"]:
-            ip, sl = rows[(theta, "ipopt")], rows[(theta, "slsqp")]
-            out[f"{theta}_speed_ratio"] = {
-                "target": TARGETS["speed_ratio"],
-                "measured": ip["speed_ratio"],
-                "met": bool(ip["speed_ratio"] >= TARGETS["speed_ratio"]),
-            }
-            out[f"{theta}_success_vs_slsqp"] = {
-                "ipopt": ip["success_rate"],
-                "slsqp": sl["success_rate"],
-                "met": bool(ip["success_rate"] >= sl["success_rate"]),
-            }
+    for solver in ("ipopt", "ipopt+C"):
+        tag = "" if solver == "ipopt" else " (" + solver + ")"
+        for theta, key in (("Theta2", "Theta2_median_ms"), ("Theta3", "Theta3_median_ms")):
+            if (theta, solver) in rows:
+                med = rows[(theta, solver)]["time_ms_median"]
+                met = med < TARGETS[key]
+                out[key + tag] = {"target": TARGETS[key], "measured": med, "met": met}
+        for theta in THETAS:
+            if (theta, solver) in rows and rows[(theta, "slsqp")]["instances"]:
+                ip, sl = rows[(theta, solver)], rows[(theta, "slsqp")]
+                out[f"{theta}_speed_ratio{tag}"] = {
+                    "target": TARGETS["speed_ratio"],
+                    "measured": ip["speed_ratio"],
+                    "met": bool(ip["speed_ratio"] >= TARGETS["speed_ratio"]),
+                }
+                out[f"{theta}_success_vs_slsqp{tag}"] = {
+                    "ipopt": ip["success_rate"],
+                    "slsqp": sl["success_rate"],
+                    "met": bool(ip["success_rate"] >= sl["success_rate"]),
+                }
     return out
 
 
@@ -758,7 +795,7 @@ def _row_md(r: dict[str, Any]) -> str:
         f"| {r['theta']} | {r['terrain']} | {r['solver']} | {r['instances']} | "
         f"{r['success_rate']:.1%} | {r['converged_rate']:.1%} | {r['time_ms_median']:.2f} | "
         f"{r['time_ms_p95']:.2f} | {r['iterations_median']:.0f} | "
-        + (f"{r['speed_ratio']:.0f}x |" if r["solver"] == "ipopt" else " |")
+        + (f"{r['speed_ratio']:.0f}x |" if r["solver"].startswith("ipopt") else " |")
     )
 
 
@@ -803,6 +840,8 @@ def render_markdown(result: dict[str, Any]) -> str:
         "`scipy.optimize.minimize` call, over all instances (failures included); one "
         "untimed warm-up solve per problem object. Problem build time is separate (below).",
         "- **speed ratio**: median SLSQP time / median IPOPT time on the same instances.",
+        "- **ipopt+C** (if present): the same NLPs with their functions compiled to C "
+        "(`ThetaOptions.jit`, cached per machine; compile time in the build times).",
         f"- SLSQP: `jac=None` (its own forward differences for every gradient and Jacobian), "
         f"maxiter {c['slsqp_options']['maxiter']}, ftol {c['slsqp_options']['ftol']:g}, same "
         "objective, constraints, bounds, p and x0 as IPOPT."
@@ -877,6 +916,9 @@ def add_bench_parser(subparsers) -> argparse.ArgumentParser:
     t.add_argument(
         "--slsqp-n", type=int, default=None, help="SLSQP on a seeded subset of this size"
     )
+    t.add_argument(
+        "--jit", action="store_true", help="also solve with the NLPs compiled to C (cached)"
+    )
     t.set_defaults(func=cmd_bench)
     from planner.bench_courses import add_courses_parser
 
@@ -893,6 +935,7 @@ def cmd_bench(args) -> int:
         seed=args.seed,
         out_dir=args.out,
         slsqp_n=args.slsqp_n,
+        jit=args.jit,
     )
     print(render_markdown(result))
     print(f"wrote {Path(args.out) / 'theta.json'} and {Path(args.out) / 'theta.md'}")

@@ -90,9 +90,10 @@ def _cmd_plan(args) -> int:
     import time
 
     from planner.local.base import LocalSettings
+    from planner.problems import ThetaOptions
     from planner.walk import plan_walk
 
-    settings = LocalSettings(time_budget_s=args.time_budget)
+    settings = LocalSettings(time_budget_s=args.time_budget, theta=ThetaOptions(jit=args.jit))
     goal = _parse_xy(args.goal, "goal")
     start = _parse_xy(args.start, "start")
     t0 = time.perf_counter()
@@ -190,6 +191,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     pl.add_argument("--time-budget", type=float, default=120.0, help="[s]")
     pl.add_argument("--out", default="plan.json")
+    pl.add_argument(
+        "--jit",
+        action="store_true",
+        help="Theta NLPs compiled to C, cached per machine (first use on a terrain: "
+        "seconds of compiling per problem, counted in the time budget)",
+    )
     pl.add_argument(
         "--global",
         dest="global_plan",

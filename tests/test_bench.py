@@ -149,3 +149,22 @@ def test_instances_are_reproducible_and_reuse_problems(littledog):
         assert ia.problem is ib.problem  # built once per support pattern
     problem, p, x0 = a[0]
     assert problem.x_block(x0, "theta").shape == (12,) and p.shape == problem._p_sym.shape[:1]
+
+
+def test_compiled_solver_rows(tmp_path, monkeypatch):
+    monkeypatch.setenv("STRATAWALK_CACHE", str(tmp_path / "cache"))
+    result = bench.run_theta_bench(
+        n_per_theta=2,
+        terrains=("flat",),
+        out_dir=tmp_path,
+        thetas=("Theta3",),
+        progress=False,
+        jit=True,
+    )
+    rows = {r["solver"]: r for r in result["groups"]}
+    assert set(rows) == {"ipopt", "ipopt+C", "slsqp"}
+    assert rows["ipopt+C"]["instances"] == 2 and rows["ipopt+C"]["speed_ratio"] > 0
+    by_solver = {g["solver"]: g for g in result["instances"]}
+    assert by_solver["ipopt"]["iterations"] == by_solver["ipopt+C"]["iterations"]
+    assert "Theta3_median_ms (ipopt+C)" in result["targets"]
+    assert "| Theta3 | flat | ipopt+C | 2 |" in (tmp_path / "theta.md").read_text()

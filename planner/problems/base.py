@@ -81,7 +81,7 @@ class ThetaOptions:
     com_length_m: float = 0.01  # sigma4 = exp(-|r_c - r_c*|^2 / (2 com_length_m^2))
     target_length_m: float = 0.01  # Theta3 sigma1 = exp(-|r - r_t|^2 / (2 target_length_m^2))
     joint_scale_rad: float = 1.0  # sigma3 = exp(-|theta - theta_nor|^2 / (2 joint_scale^2))
-    jit: bool = False  # compile the NLP's functions to C with CasADi's JIT (needs a C compiler)
+    jit: bool = False  # NLP functions compiled to C, cached on disk (planner.problems.compiled)
     mu_init: float | None = 1e-3  # None: IPOPT's adaptive strategy from 0.1
 
 
@@ -341,9 +341,14 @@ class ThetaProblem:
         }
         if self.options.mu_init is not None:
             opts["ipopt"] |= {"mu_init": self.options.mu_init, "mu_strategy": "monotone"}
-        if self.options.jit:
-            opts |= {"jit": True, "compiler": "shell", "jit_options": {"flags": ["-O2"]}}
         self.solver = ca.nlpsol(self.name, "ipopt", {"x": x, "p": p, "f": f, "g": g}, opts)
+        self.library = None  # the compiled NLP functions in use (ThetaOptions.jit), if any
+        if self.options.jit:
+            from planner.problems.compiled import compiled_library
+
+            self.library = compiled_library(self.solver, ca.Function("nlp", [x, p], [f, g]))
+            if self.library is not None:
+                self.solver = ca.nlpsol(self.name, "ipopt", str(self.library), opts)
         self._terms_fun = ca.Function(
             "terms",
             [x, p],
