@@ -158,3 +158,46 @@ def test_com_outside_support_is_reported(dog):
     assert sol2.feasible  # soft persuasion stays inside and only approaches rc
     com = Theta2(dog, terrain, support=(1, 2, 3)).check.com_W(sol2.state)
     assert np.linalg.norm(com - rc) > 0.1
+
+
+def test_clearance_constraint_generation_over_a_barrier(littledog):
+    """Theta2 lowers the body onto a 7.5 cm barrier under the belly, between the corners.
+
+    The NLP holds the bottom corners and 8 picked points of P; the independent check holds
+    all 58. Even when the first round is given the *highest* points (the barrier then
+    ignored, the body sinks onto it), the next round picks the violated ones and the
+    final configuration clears the barrier everywhere.
+    """
+    from planner.problems import base
+
+    terrain = load_terrain("barrier75mm")
+    start = Theta4(littledog, terrain).solve([0.815, 0.0, 0.17], [1, 0, 0], [0, 0, 1]).state
+    rc = Theta2(littledog, terrain).check.com_W(start) - [0.0, 0.0, 0.05]  # pull it down
+
+    natural = Theta2(littledog, terrain)
+    sol = natural.solve(start, rc, [1, 0, 0], [0, 0, 1])
+    assert sol.feasible, sol.diagnosis
+    assert natural.check.clearance(sol.state) == 0.0
+    pts_W = littledog.body_clearance_points_B @ sol.state.base_rotation_W.T
+    pts_W += sol.state.base_position_W
+    lowest = float(np.min(terrain.f_T(pts_W)))
+    assert lowest == pytest.approx(natural.options.clearance_m, abs=1e-6)  # resting on it
+    assert start.base_position_W[2] - sol.state.base_position_W[2] > 0.02
+
+    forced = Theta2(littledog, terrain)
+    rounds = []
+    pick = forced._lowest_points_B
+
+    def highest_first(state):
+        rounds.append(state)
+        if len(rounds) > 1:
+            return pick(state)
+        pts = forced._candidates_B
+        f = terrain.f_T(pts @ state.base_rotation_W.T + state.base_position_W)
+        return pts[np.argsort(-f)[: base.CLEARANCE_ACTIVE_POINTS]]
+
+    forced._lowest_points_B = highest_first
+    again = forced.solve(start, rc, [1, 0, 0], [0, 0, 1])
+    assert len(rounds) >= 2
+    assert again.feasible, again.diagnosis
+    np.testing.assert_allclose(again.state.base_position_W, sol.state.base_position_W, atol=1e-5)

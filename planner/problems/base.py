@@ -38,8 +38,8 @@ from planner.lie import coords_from_pose, pose_from_coords, rotation_from_vector
 from planner.state import State
 
 FEASIBILITY_TOL = 1e-6  # [m, rad, N]: an independent violation above this is infeasible
-CLEARANCE_ACTIVE_POINTS = 4  # points of P held by the NLP besides its bottom corners
-CLEARANCE_ROUNDS = 3  # solves at most, each one re-picking the lowest bottom-face points
+CLEARANCE_ACTIVE_POINTS = 8  # points of P held besides its bottom corners (2 per quarter)
+CLEARANCE_ROUNDS = 4  # solves at most, each one re-picking the lowest points
 
 
 @dataclass
@@ -235,6 +235,12 @@ class ThetaProblem:
         pts_B = robot.body_clearance_points_B  # the others are picked at each solve
         near = np.linalg.norm(pts_B[:, None] - self._corners_B[None], axis=2).min(axis=1)
         self._candidates_B = pts_B[near > 1e-9]
+        centre = self._corners_B.mean(axis=0)
+        front = self._candidates_B[:, 0] >= centre[0]
+        left = self._candidates_B[:, 1] >= centre[1]
+        self._quarters = [
+            np.flatnonzero((front == a) & (left == b)) for a in (0, 1) for b in (0, 1)
+        ]
         t0 = time.perf_counter()
         self._declare()
         self._build()
@@ -442,11 +448,19 @@ class ThetaProblem:
         return x, p, status, iterations, state, violations, solve_time
 
     def _lowest_points_B(self, state: State) -> np.ndarray:
-        """The ``CLEARANCE_ACTIVE_POINTS`` candidate points of P nearest the terrain."""
+        """The candidate point of P nearest the terrain in each quarter of the body.
+
+        One per quarter (front/rear x left/right of the body's centre) rather than the four
+        lowest overall: four points along one line (a barrier under the belly) would leave
+        the body free to roll onto the points beside them.
+        """
         pts_B = self._candidates_B
         f = self.terrain.f_T(pts_B @ state.base_rotation_W.T + state.base_position_W)
-        order = np.argsort(np.nan_to_num(f, nan=-np.inf), kind="stable")
-        return pts_B[order[:CLEARANCE_ACTIVE_POINTS]]
+        f = np.nan_to_num(f, nan=-np.inf)
+        per = CLEARANCE_ACTIVE_POINTS // 4
+        return np.vstack(
+            [pts_B[idx[np.argsort(f[idx], kind="stable")[:per]]] for idx in self._quarters]
+        )
 
     def solver_violations(self, x: np.ndarray, p: np.ndarray) -> dict[str, float]:
         """Violation of each group as the solver's CasADi graph sees it (for diagnosis)."""
