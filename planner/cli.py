@@ -143,14 +143,8 @@ def _cmd_demo(args) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     print(f"\nplanning LittleDog 2 m over {args.terrain} (soft persuasion, section 8.2) ...")
-    plan_args = argparse.Namespace(
-        robot="littledog",
-        terrain=args.terrain,
-        goal="2.2,0",
-        start="0.2,0",
-        planner="soft",
-        time_budget=120.0,
-        out=str(out / "plan.json"),
+    plan_args = build_parser().parse_args(  # every option of `plan`, at its default
+        ["plan", "--terrain", args.terrain, "--goal", "2.2,0", "--out", str(out / "plan.json")]
     )
     rc = _cmd_plan(plan_args)
     print(f"plan: {out / 'plan.json'}  (check it: stratawalk check {out / 'plan.json'})")

@@ -80,6 +80,13 @@ def test_demo_ends_with_the_replay_and_the_figures(walk, tmp_path, monkeypatch, 
     path, plan, _ = walk
 
     def short_plan(args):  # stands in for the 2 m walk of the demo
+        # the demo hands _cmd_plan every option of `stratawalk plan` (a missing one crashed it)
+        assert (args.planner, args.time_budget, args.jit, args.global_plan) == (
+            "soft",
+            120.0,
+            False,
+            False,
+        )
         plan.save(args.out)
         return 0
 
