@@ -678,27 +678,29 @@ def run_theta_bench(
                 )
             per_instance.append(_records_json(theta, tname, "slsqp", sl_idx, sl_list))
             pool = pooled.setdefault(theta, {"slsqp": []})
+            rows = {}
             for solver in ipopts:
                 common = [recs[solver][k] for k in sl_idx]
                 row = {"theta": theta, "terrain": tname, "solver": solver} | _stats(recs[solver])
                 row["speed_ratio"] = _speed_ratio(common, sl_list)
-                groups.append(row)
+                rows[solver] = row
                 pool.setdefault(solver, []).extend(recs[solver])
                 pool.setdefault(solver + "/common", []).extend(common)
-            row = {"theta": theta, "terrain": tname, "solver": "slsqp"} | _stats(sl_list)
-            groups.append(row | {"speed_ratio": groups[-len(ipopts)]["speed_ratio"]})
+            rows["slsqp"] = {"theta": theta, "terrain": tname, "solver": "slsqp"} | _stats(sl_list)
+            rows["slsqp"]["speed_ratio"] = rows["ipopt"]["speed_ratio"]
+            groups.extend(rows.values())
             pool["slsqp"] += sl_list
             if progress:
-                s_sl = _stats(sl_list)
+                s_sl = rows["slsqp"]
                 ips = " | ".join(
-                    f"{solver} {_stats(recs[solver])['success_rate']:.0%} "
-                    f"{_stats(recs[solver])['time_ms_median']:.2f} ms"
+                    f"{solver} {rows[solver]['success_rate']:.0%} "
+                    f"{rows[solver]['time_ms_median']:.2f} ms"
                     for solver in ipopts
                 )
                 print(
                     f"[bench] {theta:6s} {tname:9s} n={m}: {ips} | slsqp (n={len(sl_list)}) "
                     f"{s_sl.get('success_rate', 0):.0%} {s_sl.get('time_ms_median', 0):.1f} ms"
-                    f" | x{groups[-1 - len(ipopts)]['speed_ratio']:.0f}"
+                    f" | x{rows['ipopt']['speed_ratio']:.0f}"
                     f"  [{time.perf_counter() - t_start:.0f} s]",
                     file=sys.stderr,
                     flush=True,
@@ -710,7 +712,8 @@ def run_theta_bench(
             row["speed_ratio"] = _speed_ratio(pool[solver + "/common"], pool["slsqp"])
             summary.append(row)
         row = {"theta": theta, "terrain": "all", "solver": "slsqp"} | _stats(pool["slsqp"])
-        summary.append(row | {"speed_ratio": summary[-len(ipopts)]["speed_ratio"]})
+        row["speed_ratio"] = _speed_ratio(pool["ipopt/common"], pool["slsqp"])  # as before
+        summary.append(row)
     result = {
         "format": "stratawalk.bench.theta/1",
         "robot": robot_name,

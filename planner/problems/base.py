@@ -422,8 +422,8 @@ class ThetaProblem:
     def solve_rounds(self, p: np.ndarray, x0: np.ndarray, inner):
         """Run ``inner(p, x0) -> (x, status, iterations)`` with constraint generation.
 
-        Before each round the NLP's clearance parameters are set to the bottom-face points
-        of P lowest over the terrain at the current pose; a round whose solution the
+        Before each round the NLP's clearance parameters are set to the points of P
+        lowest over the terrain at the current pose; a round whose solution the
         independent check finds too close to the terrain is solved again from there (at
         most ``CLEARANCE_ROUNDS``). Returns (x, p, status, iterations, state, violations,
         solve_time_s) with p as used by the last round, the iterations summed and the
@@ -433,10 +433,11 @@ class ThetaProblem:
         p = np.array(p, dtype=float)
         picked = self._p_slices.get("clearance_points_B")
         iterations, solve_time = 0, 0.0
+        state = self._state_from_x(x, p) if picked is not None else None
         for _ in range(CLEARANCE_ROUNDS):
             t0 = time.perf_counter()
             if picked is not None:
-                p[picked] = self._lowest_points_B(self._state_from_x(x, p)).ravel()
+                p[picked] = self._lowest_points_B(state).ravel()
             x, status, n = inner(p, x)
             solve_time += time.perf_counter() - t0
             iterations += n
@@ -448,11 +449,12 @@ class ThetaProblem:
         return x, p, status, iterations, state, violations, solve_time
 
     def _lowest_points_B(self, state: State) -> np.ndarray:
-        """The candidate point of P nearest the terrain in each quarter of the body.
+        """The candidate points of P nearest the terrain, 2 per quarter of the body.
 
-        One per quarter (front/rear x left/right of the body's centre) rather than the four
-        lowest overall: four points along one line (a barrier under the belly) would leave
-        the body free to roll onto the points beside them.
+        Quarters: front/rear x left/right of the body's centre. Spread over them rather
+        than the lowest overall: points along one line (a barrier under the belly) would
+        leave the body free to roll onto the points beside them, and one point per
+        quarter let the rounds oscillate on that barrier.
         """
         pts_B = self._candidates_B
         f = self.terrain.f_T(pts_B @ state.base_rotation_W.T + state.base_position_W)

@@ -4,11 +4,12 @@ CasADi generates C for the NLP's functions (objective, constraints and their exa
 gradient, Jacobian and Lagrangian Hessian), the system C compiler builds a shared library,
 and IPOPT is created from that library (``nlpsol(name, "ipopt", "lib.so")``, CasADi's
 documented route for generated NLPs). The derivatives are the same; only their evaluation
-is faster than CasADi's SX virtual machine (on rough terrain, where every clearance point
-costs 40 cosines and their Hessian, Theta2 went from 7.5 to 4.6 ms; on flat ground there
-is nothing to gain).
+is faster than CasADi's SX virtual machine (bench/results/theta.md: Theta2 5.1 -> 3.7 ms
+on flat ground, 9.0 -> 5.3 ms on rough2cm, where every clearance point costs 40 cosines
+and their Hessian; Theta4 2x).
 
-Compiling takes seconds per problem (about 12 s for Theta2 on rough ground, at -O1), so
+Compiling takes seconds per problem (2-4 s for Theta2 on flat ground, about 20 s on rough
+ground, 34 s for Theta4, at -O1), so
 libraries are cached under ``$STRATAWALK_CACHE`` (default ``~/.cache/stratawalk``)/nlp,
 keyed by a hash of the CasADi version, the compiler flags and the serialised NLP: a new
 terrain, robot or option means a new library, an unchanged problem is compiled once per
