@@ -20,9 +20,12 @@ test: $(STAMP)
 
 # Theta1-4: IPOPT (exact derivatives) vs SLSQP (finite differences); ~4 min on 2 cores
 # courses: LittleDog x 9 courses x soft/recursive, 2 m walks, 60 s budget; ~15 min on 2 cores
+# physics: 9 courses + 20 generated, plan then MuJoCo open/feedback/correct at time scale 1;
+#   ~30-45 min on 2 cores (flat: plan 20 s, open 14 s, feedback 31 s, correct 19 s)
 bench: $(STAMP)
 	$(VENV)/bin/stratawalk bench theta --jit
 	$(VENV)/bin/stratawalk bench courses
+	$(VENV)/bin/stratawalk bench physics
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check planner tests

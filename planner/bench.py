@@ -908,7 +908,7 @@ def _target_text(v: dict[str, Any]) -> str:
 def add_bench_parser(subparsers) -> argparse.ArgumentParser:
     """Add ``bench theta [--n N] [--out DIR] [--seed S] [--terrains a,b] [--slsqp-n M]``."""
     bench = subparsers.add_parser(
-        "bench", help="benchmarks (theta: IPOPT vs SLSQP; courses: walks per course)"
+        "bench", help="benchmarks (theta: IPOPT vs SLSQP; courses: walks; physics: MuJoCo runs)"
     )
     sub = bench.add_subparsers(dest="bench_target", required=True)
     t = sub.add_parser("theta", help="Theta1-4: IPOPT vs SLSQP with finite differences")
@@ -926,6 +926,9 @@ def add_bench_parser(subparsers) -> argparse.ArgumentParser:
     from planner.bench_courses import add_courses_parser
 
     add_courses_parser(sub)
+    from planner.bench_physics import add_physics_parser
+
+    add_physics_parser(sub)
     return bench
 
 

@@ -222,6 +222,9 @@ def build_parser() -> argparse.ArgumentParser:
     from planner.batch import add_batch_parser
 
     add_batch_parser(sub)
+    from planner.course_gen import add_generate_parser
+
+    add_generate_parser(sub)
     return p
 
 

@@ -1,6 +1,8 @@
 """Interpolation along a leaf of a stratum (paper section 7.1, eq. 6a/6b) and swing paths.
 
-On a leaf the stance feet's contact points r_j are fixed; the base pose g moves linearly in
+On a leaf of the paper the stance feet's contact points r_j are fixed (here they roll, see
+:mod:`planner.rolling`: the sphere centres move by rho w x n as the shanks turn, which is
+what MuJoCo's rigid sphere feet do); the base pose g moves linearly in
 compact exponential coordinates (section 4.7),
 
     g(nu) = g~((1 - nu) eps~(g_1) + nu eps~(g_2)),   nu in [0, 1],
@@ -33,6 +35,7 @@ from numpy.typing import ArrayLike, NDArray
 from planner.contact import E_Z, foot_centre_from_contact
 from planner.kinematics import kinematics_of
 from planner.lie import interpolate_coords, pose_from_coords
+from planner.rolling import leg_rotations_W, roll_stance_feet
 from planner.state import State
 
 if TYPE_CHECKING:
@@ -300,6 +303,7 @@ def _interpolate(
     swing: str,
     clearance_m: float | None,
     liftoff_m: float | None,
+    rolling: bool = True,
 ) -> list[State]:
     if int(n) != n or n < 2:
         raise ValueError(f"interpolate: n must be an integer >= 2, got {n!r}")
@@ -338,9 +342,18 @@ def _interpolate(
     kin = kinematics_of(robot)
     ref = state_a.joints_rad
     out: list[State] = []
+    rot_prev = None
     for k in range(n):
         p, R = poses[k][:3, 3], poses[k][:3, :3]
-        results = kin.ik(p, R, centres[k], reference_rad=ref)
+        if rolling and k > 0 and stance:
+            if k > 1:  # first guess: the previous sample's rolling again
+                centres[k, stance] = 2.0 * centres[k - 1, stance] - centres[k - 2, stance]
+            centres[k], feet[k, stance], results, rot_prev = roll_stance_feet(
+                kin, terrain, p, R, centres[k - 1], feet[k - 1], rot_prev, stance, centres[k], ref
+            )
+        else:
+            results = kin.ik(p, R, centres[k], reference_rad=ref)
+            rot_prev = leg_rotations_W(kin, R, np.array([r.joints_rad for r in results]))
         joints = np.array([r.joints_rad for r in results])
         bad = [i for i, r in enumerate(results) if not r.reachable]
         end = state_a if k == 0 else state_b if k == n - 1 else None
@@ -380,13 +393,17 @@ def interpolate_leaf(
     swing: str = "path",
     clearance_m: float | None = None,
     liftoff_m: float | None = None,
+    rolling: bool = True,
 ) -> list[State]:
     """Sample the leaf between two states at n values of nu in [0, 1] (section 7.1).
 
     The leaf's stratum is the states' common stratum; a state on S0 may pair with one on
     S_i (S0 ∩ S_i bounds S_i's leaves), the leaf is then S_i's. The base pose follows eq.
     6a/6b (linear in compact exponential coordinates, ends exact). Stance feet must agree
-    between the states (ValueError naming the leg otherwise) and stay put. On S_i the swing
+    between the states (ValueError naming the leg otherwise); they do not slide, they roll
+    (``rolling``, :mod:`planner.rolling`: each centre moves by rho w x n as its shank turns,
+    so the last state's stance feet and joints differ from ``state_b``'s by the rolling;
+    ``rolling=False`` keeps the paper's fixed contact points). On S_i the swing
     foot follows :func:`swing_path` (``swing="path"``) or, as eq. 6a, moves linearly in
     sphere-centre space (``swing="linear"``, which may cut through the terrain).
 
@@ -412,6 +429,7 @@ def interpolate_leaf(
         swing,
         clearance_m,
         liftoff_m,
+        rolling,
     )
 
 
@@ -424,6 +442,7 @@ def interpolate_swing(
     clearance_m: float | None = None,
     swing_leg: int | None = None,
     liftoff_m: float | None = None,
+    rolling: bool = True,
 ) -> list[State]:
     """Swing one leg from ``state_lift`` to ``state_touch`` while the base interpolates.
 
@@ -463,4 +482,5 @@ def interpolate_swing(
         "path",
         clearance_m,
         liftoff_m,
+        rolling,
     )

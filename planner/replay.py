@@ -379,8 +379,9 @@ def _support(s: PlanSeries, root: meshcat.Visualizer, tr: _Tracks) -> None:
     """The polygon of the feet on the ground, one object per stance (shown while it lasts)."""
     geo = _geometry()
     mg = geo.mg
-    key = [s.contact[k].tobytes() + np.round(s.feet_W[k][s.contact[k]], 6).tobytes()
-           for k in range(len(s))]  # fmt: skip
+    # a stance lasts while the contact flags do (its feet roll by millimetres meanwhile,
+    # planner.rolling: the polygon of its first sample stands for it)
+    key = [s.contact[k].tobytes() for k in range(len(s))]
     starts = [0] + [k for k in range(1, len(s)) if key[k] != key[k - 1]]
     stops = starts[1:] + [len(s)]
     for i, (a, b) in enumerate(zip(starts, stops, strict=True)):

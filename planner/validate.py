@@ -20,8 +20,11 @@ Checks (``Violation.kind``), at every sample unless marked keyframe:
 ``joint_limits`` (samples and keyframes)
     A joint beyond the URDF limits by more than 1e-9 rad (section 7.2 c).
 ``stance_slip``
-    A foot in contact at two consecutive samples whose sphere centre (from FK), hence its
-    contact point, moves by more than 1e-6 m: stance feet stay put along a leaf (4.3).
+    A foot in contact at two consecutive samples that *slides* by more than 1e-6 m: the
+    tangential part of its sphere centre's travel (FK) minus the rolling rho w x n of the
+    sphere turned by w with the shank (foot frame rotations by Pinocchio; n the normal at
+    the first sample's contact). A rigid sphere foot that does not slide rolls
+    (:mod:`planner.rolling`; the simulator's sliding metric is the same quantity).
 ``foot_on_terrain`` (samples and keyframes)
     A foot not resting on the *smooth* terrain the planner saw, by more than 1e-4 m
     (section 4.4): ``|f_T(r)|`` of a stored contact point; for a sample, the miss of the
@@ -38,11 +41,21 @@ Checks (``Violation.kind``), at every sample unless marked keyframe:
 ``swing_clearance``
     A swing foot's sphere centre closer to the sharp terrain than ``rho - 1e-4 m`` (the
     sphere penetrates the real surface).
+``leg_clearance``
+    A thigh or shank capsule (:mod:`planner.links`: the URDF's collision cylinder of the
+    link, or its documented stand-in) closer to the sharp terrain than
+    ``leg_clearance_m`` (0: touching). Points every 2 mm along the axis; Euclidean
+    distance to the surface and its vertical faces, refined to 0.2 mm along the axis
+    near the closest point.
 ``balance``
     No contact forces inside the friction cones of the feet in contact balance gravity
     and moments at Pinocchio's whole-body COM (exact SOCP,
     :func:`planner.statics.static_feasibility`; normals of the smooth terrain; mu of the
     file).
+``joint_torque``
+    With three or more feet down, no contact forces inside the friction cones balance the
+    robot with every joint torque (gravity of all links and the contact forces through
+    Pinocchio's Jacobians) within its URDF effort limit (:mod:`planner.torques`).
 ``keyframe_forces`` (keyframes)
     Stored forces do not balance gravity and moments (eq. 4) to 1e-6 m g (moments in N m
     about the support centroid), or a foot outside ``support`` carries force.
@@ -69,10 +82,13 @@ import pinocchio as pin
 from numpy.typing import NDArray
 
 from planner import statics
-from planner.contact import E_Z, contact_from_foot_centre, foot_centre_from_contact
+from planner.contact import E_Z, contact_points_from_centres, foot_centre_from_contact
 from planner.errors import PlannerError
+from planner.links import LegLinks
 from planner.plan import Plan
 from planner.robot import LEG_NAMES
+from planner.rolling import sliding
+from planner.torques import TorqueCheck
 
 if TYPE_CHECKING:
     from planner.robot import Robot
@@ -90,6 +106,7 @@ __all__ = [
 
 _Array = NDArray[np.float64]
 GRAVITY_MPS2 = 9.81
+_LEG_EXACT_M = 0.004  # leg clearances are exact below this [m]; above, a lower bound
 
 
 @dataclass(frozen=True)
@@ -100,12 +117,14 @@ class CheckTolerances:
     ----------
     fk_m : keyframe FK vs stored feet.
     joint_rad : excursion past a joint limit.
-    slip_m : motion of a foot in contact between consecutive samples.
+    slip_m : sliding of a foot in contact between consecutive samples (travel minus rolling).
     on_terrain_m : ``|f_T|`` of a contact point on the smooth terrain.
     sharp_surface_m : distance of a contact point from the sharp surface; None: the
         terrain's largest smoothing width + 1 mm (6 mm by default).
     body_clearance_m : least height of the body box above the sharp terrain.
     swing_penetration_m : allowed penetration of a swing foot sphere into the sharp terrain.
+    leg_clearance_m : least distance of a thigh or shank capsule to the sharp terrain.
+    torque_rel : a joint torque may exceed its effort limit by this fraction.
     force_balance_rel : keyframe force/moment residual, as a fraction of m g.
     min_contacts : feet that must be down at every sample.
     balance_tol_N : margin the exact statics test must exceed; None: its default.
@@ -121,6 +140,8 @@ class CheckTolerances:
     sharp_surface_m: float | None = None
     body_clearance_m: float = 0.0
     swing_penetration_m: float = 1e-4
+    leg_clearance_m: float = 0.0
+    torque_rel: float = 1e-6
     force_balance_rel: float = 1e-6
     min_contacts: int = 3
     balance_tol_N: float | None = None
@@ -156,9 +177,12 @@ class CheckReport:
     at the samples within 1 cm of the ground and the 8 closest, elsewhere the lowest
     vertex over the highest terrain node under the body);
     ``min_swing_clearance_m``: least distance of a swing sphere to the sharp surface
-    (negative: penetration; a lower bound where the foot is far up); ``min_balance_margin_N``:
-    least force margin of the statics test; ``max_slip_m``: largest stance-foot motion
-    between samples. NaN when there was nothing to measure.
+    (negative: penetration; a lower bound where the foot is far up); ``min_leg_clearance_m``:
+    least distance of a thigh or shank capsule to the sharp terrain (exact below 4 mm, a
+    lower bound above); ``max_torque_ratio``: largest joint torque over its effort limit
+    (with the least demanding forces); ``min_balance_margin_N``:
+    least force margin of the statics test; ``max_slip_m``: largest stance-foot sliding
+    between samples (travel minus rolling). NaN when there was nothing to measure.
     """
 
     violations: list[Violation] = field(default_factory=list)
@@ -166,7 +190,9 @@ class CheckReport:
     n_keyframes: int = 0
     min_body_clearance_m: float = math.nan
     min_swing_clearance_m: float = math.nan
+    min_leg_clearance_m: float = math.nan
     min_balance_margin_N: float = math.nan
+    max_torque_ratio: float = math.nan
     max_slip_m: float = math.nan
     elapsed_s: float = 0.0
     tolerances: CheckTolerances = field(default_factory=CheckTolerances)
@@ -184,8 +210,11 @@ class CheckReport:
         """One line: verdict, counts per kind, and the summary figures."""
         figs = (
             f"min body clearance {_mm(self.min_body_clearance_m)}, min swing clearance "
-            f"{_mm(self.min_swing_clearance_m)}, min balance margin "
-            f"{self.min_balance_margin_N:.3g} N, max stance slip {_mm(self.max_slip_m)}"
+            f"{_mm(self.min_swing_clearance_m)}, min leg clearance "
+            f"{_mm(self.min_leg_clearance_m)}, min balance margin "
+            f"{self.min_balance_margin_N:.3g} N, max joint torque "
+            f"{100 * self.max_torque_ratio:.0f} % of its limit, max stance slip "
+            f"{_mm(self.max_slip_m)}"
         )
         head = f"checked {self.n_samples} samples and {self.n_keyframes} keyframes"
         if self.ok:
@@ -296,84 +325,6 @@ def sharp_surface_distance(
             np.minimum.at(d, ip, dface)
         best[a : a + n] = np.minimum(best[a : a + n], d)
     return np.where(gap >= 0.0, 1.0, -1.0) * best
-
-
-def contact_points_from_centres(
-    terrain: Terrain, centres_W: _Array, radius_m: float, refine_above_m: float = 1e-6
-) -> tuple[_Array, _Array]:
-    """Contact points of foot spheres resting on the smooth terrain, and how well they rest.
-
-    The contract (DESIGN.md section 3, :mod:`planner.contact`): ``c = r + rho n(r)`` with
-    r on the surface. It is solved by Gauss-Newton on ``r_xy`` from the point
-    ``c - rho n(c_xy)`` (the tangent plane under the centre, exact on planar ground); where
-    the fit is worse than ``refine_above_m`` (where rho times the curvature
-    exceeds 1 the map r -> r + rho n(r) folds and has several roots), from the best node
-    of a 0.25 mm grid within 1.2 rho of the centre.
-
-    Parameters
-    ----------
-    terrain : Terrain
-        Smooth ``height``, ``normal`` and ``f_T``.
-    centres_W : array (N, 3)
-        Sphere centres [m], world frame.
-    radius_m : float
-        Sphere radius rho [m].
-    refine_above_m : float
-        Miss [m] above which the grid search is run.
-
-    Returns
-    -------
-    contacts : ndarray (N, 3)
-        Contact points [m]: ``c - rho n`` with the normal of the better convention (on the
-        terrain when the foot rests on it).
-    miss : ndarray (N,)
-        How far the foot is from resting on the terrain [m]: ``|r + rho n(r) - c|`` with r
-        on the surface.
-
-    """
-    c = np.asarray(centres_W, dtype=float).reshape(-1, 3)
-    rho = float(radius_m)
-    r2 = contact_from_foot_centre(terrain, c, rho)
-    miss2 = np.abs(np.atleast_1d(terrain.f_T(r2))).astype(float)
-
-    def residual(xy: _Array, cc: _Array) -> tuple[_Array, _Array]:
-        """Surface point over xy, and its r + rho n(r) - c."""
-        p = np.column_stack([xy, np.asarray(terrain.height(xy[:, 0], xy[:, 1])).reshape(-1)])
-        return p, p + rho * np.asarray(terrain.normal(p)).reshape(-1, 3) - cc
-
-    def gauss_newton(xy: _Array, cc: _Array, steps: int = 8) -> tuple[_Array, _Array]:
-        h = 1e-7
-        for _ in range(steps):
-            f = residual(xy, cc)[1]
-            jac = np.stack(
-                [
-                    (residual(xy + d, cc)[1] - residual(xy - d, cc)[1]) / (2 * h)
-                    for d in (np.array([h, 0.0]), np.array([0.0, h]))
-                ],
-                axis=-1,
-            )  # (N, 3, 2)
-            jtj = np.einsum("nki,nkj->nij", jac, jac) + 1e-12 * np.eye(2)
-            step = np.linalg.solve(jtj, np.einsum("nki,nk->ni", jac, f)[..., None])[..., 0]
-            xy = xy - np.clip(step, -rho, rho)
-        p, f = residual(xy, cc)
-        return p, np.linalg.norm(f, axis=1)
-
-    r1, miss1 = gauss_newton(r2[:, :2].copy(), c)
-    bad = np.flatnonzero(np.minimum(miss1, miss2) > refine_above_m)
-    if len(bad):
-        k = int(math.ceil(1.2 * rho / 2.5e-4))
-        u = 2.5e-4 * np.arange(-k, k + 1)
-        ux, uy = (g.ravel() for g in np.meshgrid(u, u))
-        for j in bad:
-            xy = np.column_stack([c[j, 0] + ux, c[j, 1] + uy])
-            f = np.linalg.norm(residual(xy, c[j])[1], axis=1)
-            p, m = gauss_newton(xy[[int(np.argmin(f))]], c[j][None])
-            if m[0] < miss1[j]:
-                r1[j], miss1[j] = p[0], m[0]
-    # the sphere's point along the normal: r1 itself when the foot rests on the terrain
-    r1 = c - rho * np.asarray(terrain.normal(r1)).reshape(-1, 3)
-    del miss2  # r2 (tangent plane under the centre) only seeds the solve
-    return r1, miss1
 
 
 def _unique_contacts(terrain: Terrain, centres_W: _Array, radius_m: float) -> tuple[_Array, _Array]:
@@ -634,9 +585,11 @@ class _Checker:
             )
         centres = np.empty((n, 4, 3))
         coms = np.empty((n, 3))
+        foot_rot = np.empty((n, 4, 3, 3))
         for k in range(n):
             self.joint_limits(sm.q[k], f"sample {k}")
             centres[k], coms[k] = self.kinematics(sm.q[k])
+            foot_rot[k] = [self.data.oMf[i].rotation for i in self.foot_ids]
         down = sm.contact
 
         # contact points (from FK) of the feet in contact, and how far off the terrain
@@ -658,11 +611,21 @@ class _Checker:
                 f"{tol.min_contacts} must be down",
             )
 
-        # stance slip between consecutive samples
+        # stance sliding between consecutive samples: travel minus rolling (planner.rolling)
         if n > 1:
             both = down[1:] & down[:-1]
-            moved = np.linalg.norm(centres[1:] - centres[:-1], axis=2)
-            moved = np.where(both, moved, 0.0)
+            moved = np.zeros((n - 1, 4))
+            ks, ls = np.nonzero(both)
+            if len(ks):
+                normals = np.asarray(self.terrain.normal(contacts[ks, ls]), float).reshape(-1, 3)
+                moved[ks, ls] = sliding(
+                    centres[ks, ls],
+                    centres[ks + 1, ls],
+                    foot_rot[ks, ls],
+                    foot_rot[ks + 1, ls],
+                    normals,
+                    rho,
+                )
             report.max_slip_m = float(moved.max()) if both.any() else math.nan
             for k, i in zip(*np.nonzero(moved > tol.slip_m), strict=True):
                 self.add(
@@ -671,8 +634,8 @@ class _Checker:
                     i,
                     moved[k, i],
                     tol.slip_m,
-                    f"{_leg(i)} moved {_mm(moved[k, i])} while in contact (limit "
-                    f"{_mm(tol.slip_m)})",
+                    f"{_leg(i)} slid {_mm(moved[k, i])} while in contact (centre travel "
+                    f"minus rolling; limit {_mm(tol.slip_m)})",
                 )
 
         # feet on the smooth terrain, and near the sharp one
@@ -712,8 +675,10 @@ class _Checker:
                         )
 
         self.body_clearance(report)
+        self.leg_clearance(report)
         self.swing_clearance(centres, report)
         self.balance(contacts, coms, report)
+        self.joint_torques(contacts, report)
 
     def body_clearance(self, report: CheckReport) -> None:
         """Body box P vs the sharp terrain: a tile bound first, exact points where close."""
@@ -764,6 +729,70 @@ class _Checker:
                 f"{_mm(tol.body_clearance_m)})",
             )
 
+    def leg_clearance(self, report: CheckReport) -> None:
+        """Thigh and shank capsules vs the sharp terrain (``leg_clearance``)."""
+        from scipy.ndimage import maximum_filter
+
+        sm, tol = self.plan.samples, self.tol
+        links = LegLinks(self.robot)
+        n, P = len(sm), len(links.owner)
+        pts = np.empty((n, P, 3))
+        for k in range(n):
+            pts[k] = links.axis_points_W(sm.q[k])
+        flat = pts.reshape(-1, 3)
+        rad = np.tile(links.radius, n)
+        # bound: highest terrain node within (radius + node) of a point, on a 5 mm raster
+        node = _TileMax.NODE_M
+        reach = float(links.radius.max()) + 2.0 * node
+        x0, y0 = flat[:, 0].min() - reach, flat[:, 1].min() - reach
+        nx = int(math.ceil((flat[:, 0].max() + reach - x0) / node)) + 1
+        ny = int(math.ceil((flat[:, 1].max() + reach - y0) / node)) + 1
+        gx, gy = np.meshgrid(x0 + node * np.arange(nx), y0 + node * np.arange(ny))
+        H = np.asarray(self.terrain.height_sharp(gx, gy), dtype=float).reshape(ny, nx)
+        M = maximum_filter(H, size=2 * int(math.ceil(reach / node)) + 1, mode="nearest")
+        ix = np.clip(np.rint((flat[:, 0] - x0) / node).astype(int), 0, nx - 1)
+        iy = np.clip(np.rint((flat[:, 1] - y0) / node).astype(int), 0, ny - 1)
+        clear = flat[:, 2] - rad - M[iy, ix] - _TileMax.SLACK_M  # a lower bound
+        near = np.flatnonzero(clear < tol.leg_clearance_m + _LEG_EXACT_M)
+        if len(near):
+            search = float(rad[near].max()) + tol.leg_clearance_m + _LEG_EXACT_M + 2e-3
+            d = sharp_surface_distance(self.terrain, flat[near], search, tol.surface_step_m)
+            # a distance clipped at the search radius is only known to be at least that
+            clear[near] = np.where(np.abs(d) < search, d - rad[near], search - rad[near])
+        per = np.full((n, len(links.capsules)), np.inf)
+        owner = np.tile(links.owner, n)
+        sample = np.repeat(np.arange(n), P)
+        np.minimum.at(per, (sample, owner), clear)
+        # refine along the axis around the closest point of the capsules near the limit
+        for k, c in zip(*np.nonzero(per < tol.leg_clearance_m + 1e-3), strict=True):
+            per[k, c] = min(per[k, c], self._capsule_clearance(links, sm.q[k], c))
+        report.min_leg_clearance_m = float(per.min()) if per.size else math.nan
+        for k, c in zip(*np.nonzero(per < tol.leg_clearance_m), strict=True):
+            cap = links.capsules[c]
+            self.add(
+                "leg_clearance",
+                f"sample {k}",
+                cap.leg,
+                per[k, c],
+                tol.leg_clearance_m,
+                f"{_leg(cap.leg)} {cap.link} ({cap.urdf_link}) reaches {_mm(-per[k, c])} into "
+                f"the sharp terrain (least clearance {_mm(tol.leg_clearance_m)})",
+            )
+
+    def _capsule_clearance(self, links: LegLinks, q: _Array, c: int) -> float:
+        """Clearance of capsule c at q from points 0.2 mm apart along its whole axis."""
+        cap = links.capsules[c]
+        a, b = (s[c] for s in links.segments_W(q))
+        u = np.linspace(0.0, 1.0, max(2, int(math.ceil(cap.length_m / 2e-4)) + 1))[:, None]
+        p = (1.0 - u) * a + u * b
+        gap = p[:, 2] - np.asarray(self.terrain.height_sharp(p[:, 0], p[:, 1])).reshape(-1)
+        search = cap.radius_m + self.tol.leg_clearance_m + _LEG_EXACT_M + 2e-3
+        sel = np.flatnonzero(gap < search)
+        if not len(sel):
+            return float(gap.min() - cap.radius_m)
+        d = sharp_surface_distance(self.terrain, p[sel], search, self.tol.surface_step_m)
+        return float(min(d.min(), search) - cap.radius_m)
+
     def swing_clearance(self, centres: _Array, report: CheckReport) -> None:
         """Swing spheres vs the sharp terrain: a tile bound first, distances where close."""
         sm, tol, rho = self.plan.samples, self.tol, self.rho
@@ -792,6 +821,10 @@ class _Checker:
                 f"{'at least ' if -clear[j] >= rho else ''}{_mm(-clear[j])} (limit "
                 f"{_mm(tol.swing_penetration_m)})",
             )
+
+    def joint_torques(self, contacts: _Array, report: CheckReport) -> None:
+        """Joint torques within the URDF effort limits (``joint_torque``)."""
+        _joint_torques(self, contacts, report)
 
     def balance(self, contacts: _Array, coms: _Array, report: CheckReport) -> None:
         sm, tol = self.plan.samples, self.tol
@@ -828,6 +861,38 @@ class _Checker:
                     f"{coms[k, 2]:.4f}) m: margin {res.margin_N:.3g} N ({res.status})",
                 )
         report.min_balance_margin_N = worst if math.isfinite(worst) else math.nan
+
+
+def _joint_torques(ck: _Checker, contacts: _Array, report: CheckReport) -> None:
+    """``joint_torque``: some balancing cone forces within every joint's effort limit."""
+    sm, tol = ck.plan.samples, ck.tol
+    torques = TorqueCheck(ck.robot)
+    down = sm.contact
+    worst = -math.inf
+    for k in range(len(sm)):
+        sup = np.flatnonzero(down[k])
+        if len(sup) < 3:
+            continue
+        normals = np.tile(E_Z, (4, 1))
+        normals[sup] = ck.terrain.normal(contacts[k, sup])
+        res = torques.solve(sm.q[k], sup, ck.mu, normals)
+        if not math.isfinite(res.ratio):
+            continue  # no balancing forces at all: ``balance`` reports it
+        worst = max(worst, res.ratio)
+        if res.ratio > 1.0 + tol.torque_rel:
+            j = res.worst_joint
+            leg, name = ck.q_leg[ck.robot.legs[j // 3].q_index + j % 3]
+            ck.add(
+                "joint_torque",
+                f"sample {k}",
+                leg,
+                res.ratio,
+                1.0 + tol.torque_rel,
+                f"{_leg(leg)} joint '{name}' needs {abs(res.torques_nm[j]):.3g} N m, "
+                f"{res.ratio:.3g} x its effort limit {torques.effort[j]:.3g} N m, with the "
+                "least demanding balancing forces in the friction cones",
+            )
+    report.max_torque_ratio = worst if math.isfinite(worst) else math.nan
 
 
 def _order(v: Violation) -> tuple[int, int]:

@@ -153,7 +153,7 @@ def test_s0_leaf_keeps_feet_and_lands_fk_on_sphere_centres(littledog, kind, sour
     b = a.copy()
     g_b = a.pose @ pose_from_coords([0.03, -0.015, -0.012, 0.05, -0.04, 0.15])
     b.base_position_W, b.base_rotation_W = g_b[:3, 3], g_b[:3, :3]
-    states = interpolate_leaf(littledog, terrain, a, b, 9)
+    states = interpolate_leaf(littledog, terrain, a, b, 9, rolling=False)  # the paper's leaf
     assert len(states) == 9
     _assert_on_leaf(littledog, terrain, states, [0, 1, 2, 3])
     # base follows eq. 6b, ends exact
@@ -260,7 +260,7 @@ def test_interpolate_swing_over_a_step(littledog, source):
     kin = kinematics_of(littledog)
     c = foot_centres_W(terrain, b.feet_W, b.in_contact, rho)
     b.joints_rad = np.array([r.joints_rad for r in kin.ik(b.base_position_W, b.base_rotation_W, c)])
-    states = interpolate_swing(littledog, terrain, a, b, 15, clearance_m=0.03)
+    states = interpolate_swing(littledog, terrain, a, b, 15, clearance_m=0.03, rolling=False)
     assert [s.stratum for s in states] == [0] + [1] * 13 + [0]
     assert all(s.support == (1, 2, 3) for s in states[1:-1])
     _assert_on_leaf(littledog, terrain, states, [1, 2, 3])
@@ -276,7 +276,7 @@ def test_interpolate_swing_over_a_step(littledog, source):
     # same leg found from the states alone
     b1 = b.copy()
     b1.stratum = 1
-    again = interpolate_swing(littledog, terrain, a, b1, 15, clearance_m=0.03)
+    again = interpolate_swing(littledog, terrain, a, b1, 15, clearance_m=0.03, rolling=False)
     np.testing.assert_array_equal(again[7].feet_W, states[7].feet_W)
 
 

@@ -9,6 +9,7 @@ from planner.errors import InputError
 from planner.interpolate import interpolate_leaf, interpolate_swing
 from planner.plan import GRID_MARGIN_M, PLAN_FORMAT, Plan
 from planner.problems import Theta2, Theta3, Theta4
+from planner.rolling import end_keyframe
 from planner.terrain import load_terrain
 
 OUTCOME = {"reached_goal": True, "distance_to_goal": 0.0, "message": "test plan"}
@@ -21,11 +22,10 @@ def walk(littledog):
     a = Theta4(littledog, terrain).solve([0.3, 0.0, 0.15], [1, 0, 0], [0, 0, 1]).state
     rc = a.feet_W[[1, 2, 3]].mean(axis=0) + [0.0, 0.0, 0.15]
     b = Theta2(littledog, terrain, support=(1, 2, 3)).solve(a, rc, [1, 0, 0], [0, 0, 1]).state
+    move = interpolate_leaf(littledog, terrain, a, b, 8)  # stance feet roll
+    b = end_keyframe(littledog, move, (1, 2, 3))
     c = Theta3(littledog, terrain, leg=0).solve(b, b.feet_W[0] + [0.04, 0.0, 0.0]).state
-    samples = (
-        interpolate_leaf(littledog, terrain, a, b, 8)
-        + interpolate_swing(littledog, terrain, b, c, 8)[1:]
-    )
+    samples = move[:-1] + [b] + interpolate_swing(littledog, terrain, b, c, 8)[1:]
     times = list(0.1 * np.arange(len(samples)))
     plan = Plan.build(
         littledog, terrain, 0.7, a.base_position_W, c.base_position_W, [a, b, c], samples,

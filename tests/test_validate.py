@@ -7,8 +7,10 @@ import pytest
 
 from planner.interpolate import interpolate_leaf, interpolate_swing
 from planner.kinematics import kinematics_of
+from planner.links import LegLinks
 from planner.plan import Plan
 from planner.problems import Theta2, Theta3, Theta4
+from planner.rolling import end_keyframe
 from planner.terrain import load_terrain
 from planner.validate import (
     CheckTolerances,
@@ -38,7 +40,12 @@ def make_plan(dog, terrain_name, x, step_m, land_x=None):
     placed = theta3.solve(b, b.feet_W[0] + [step_m, 0.0, 0.0], x0=theta3.initial_guess(b))
     assert placed.feasible, placed.diagnosis
     c = placed.state
-    samples = interpolate_leaf(dog, terrain, a, b, N) + interpolate_swing(dog, terrain, b, c, N)[1:]
+    move = interpolate_leaf(dog, terrain, a, b, N)  # the stance feet roll (planner.rolling)
+    b = end_keyframe(dog, move, (1, 2, 3))
+    c.feet_W[1:], c.joints_rad[1:] = b.feet_W[1:], b.joints_rad[1:]
+    swing = interpolate_swing(dog, terrain, b, c, N)
+    c = end_keyframe(dog, swing, (0, 1, 2, 3))
+    samples = move[:-1] + [b] + swing[1:-1] + [c]
     times = list(0.05 * np.arange(len(samples)))
     return Plan.build(
         dog, terrain, terrain.friction, a.base_position_W, c.base_position_W, [a, b, c],
@@ -96,7 +103,10 @@ def test_sliding_stance_feet_fail(flat_plan):
     assert len(slips) == 8 and {v.leg for v in slips} == {1, 2, 3, 4}
     assert all(v.value == pytest.approx(0.005, abs=1e-9) for v in slips)
     msgs = [str(v) for v in slips]
-    assert "sample 5: stance_slip: leg 2 (FR) moved 5 mm while in contact (limit 0.001 mm)" in msgs
+    assert (
+        "sample 5: stance_slip: leg 2 (FR) slid 5 mm while in contact (centre travel minus "
+        "rolling; limit 0.001 mm)" in msgs
+    )
 
 
 def test_com_outside_three_feet_fails_balance(flat_plan):
@@ -147,6 +157,33 @@ def test_swing_foot_in_the_ground_fails(flat_plan, littledog):
     assert [(v.where, v.leg) for v in viols] == [(f"sample {k}", 1)]
     assert viols[0].value == pytest.approx(0.004, abs=2e-5)
     assert report.min_swing_clearance_m == pytest.approx(-0.004, abs=2e-5)
+
+
+def test_shank_in_a_step_edge_fails(flat_plan, littledog):
+    """A 6 mm thick wall whose top is 3 mm above the bottom of the swinging shank."""
+    assert check_plan(flat_plan).min_leg_clearance_m > 0.0
+    plan = edited(flat_plan)
+    k = MID_SWING
+    links = LegLinks(littledog)
+    c = next(i for i, cap in enumerate(links.capsules) if cap.leg == 0 and cap.link == "shank")
+    a, b = (s[c] for s in links.segments_W(plan.samples.q[k]))
+    low = a if a[2] < b[2] else b  # the capsule's lowest point is below this axis end
+    r = links.capsules[c].radius_m
+    plan.terrain = {
+        **plan.terrain,
+        "kind": "barrier",
+        "x": float(low[0]) - 0.003,
+        "thickness": 0.006,
+        "height": float(low[2]) - r + 0.003,
+        "opening": [-1.0, float(low[1]) - 0.03],  # the wall only on the left
+    }
+    report = check_plan(plan)
+    legs = [v for v in report.violations if v.kind == "leg_clearance"]
+    at_k = [v for v in legs if v.where == f"sample {k}" and v.leg == 1]
+    assert at_k, "\n".join(map(str, legs))
+    assert at_k[0].value == pytest.approx(-0.003, abs=3e-4)
+    assert "leg 1 (FL) shank (FL_lower) reaches 3" in at_k[0].message
+    assert report.min_leg_clearance_m < -0.003 + 3e-4  # later samples swing through the wall
 
 
 def test_keyframe_feet_must_match_fk(flat_plan):

@@ -30,15 +30,20 @@ from planner.heuristics import (
 )
 from planner.interpolate import default_clearance_m, interpolate_leaf, interpolate_swing
 from planner.kinematics import kinematics_of
+from planner.links import leg_links
 from planner.local.gait_queue import CRAWL
 from planner.problems import Theta2, Theta3, Theta4, ThetaOptions
 from planner.problems.base import ConstraintCheck
 from planner.robot import LEG_NAMES
+from planner.rolling import end_keyframe
 from planner.state import State
+from planner.torques import TorqueCheck
 from planner.trajectory import Trajectory
 
 BODY_CLEARANCE_M = 0.005  # least height of the body's bottom above the sharp terrain [m]
 TARGET_RADIUS_M = 0.01  # a placed foot lands within this of its (edge-free) target [m]
+LEG_CLEARANCE_M = 0.004  # least clearance of a thigh or shank capsule (planner.links) [m]
+TORQUE_FRACTION = 0.8  # joint torque / URDF effort the servos may need to hold a sample
 
 
 @dataclass
@@ -177,6 +182,7 @@ class LocalPlanner:
         self.extra_stats: dict = {}
         self.check = ConstraintCheck(robot, terrain, self.settings.theta)
         self._bottom_B = robot.body_bottom_points_B(spacing_m=0.005, rows=5)  # path checks
+        self.torques = TorqueCheck(robot)
 
     # ---- problems, built once per support pattern / leg --------------------------------
     def theta2(self, support) -> Theta2:
@@ -282,6 +288,7 @@ class LocalPlanner:
             sol.feasible = False
             sol.diagnosis = f"body move onto three legs: {why}"
             return sol, []
+        sol.state = self.path_end(path, support)
         return sol, path
 
     def swing(self, state: State, leg: int, tau: Trajectory, step_m: float, target_W=None):
@@ -325,6 +332,7 @@ class LocalPlanner:
             why = self.path_problem(path)
             self._count("swing_ik", not why)
             if not why:
+                sol.state = self.path_end(path, tuple(range(4)))
                 return sol, path
             if "balance" in why:  # a lower swing does not move the COM less
                 break
@@ -337,10 +345,14 @@ class LocalPlanner:
 
         Keyframes are feasible by construction, the samples between them are not: a leg
         can run out of reach mid-way, the body box can dip onto the sharp terrain (its
-        bottom face is checked on a 5 mm grid), and the COM moves (the body along eq. 6b, the swing
-        leg's own mass) so that it can leave the support. Every sample is checked with IK
-        and the exact friction-cone test (:func:`planner.statics.static_feasibility`),
-        with a margin of ``settings.balance_margin_frac`` x m g.
+        bottom face is checked on a 5 mm grid), a thigh or shank can pass through an edge
+        (:meth:`planner.links.LegLinks.clearance_fast`, ``LEG_CLEARANCE_M``), and the COM
+        moves (the body along eq. 6b, the swing leg's own mass) so that it can leave the
+        support, or needs joint torques near the servos' limits (``TORQUE_FRACTION`` of
+        the URDF effort, :mod:`planner.torques`: a saturated servo cannot track). Every
+        sample is checked with IK and the exact friction-cone test
+        (:func:`planner.statics.static_feasibility`), with a margin of
+        ``settings.balance_margin_frac`` x m g.
         """
         from planner.statics import static_feasibility
 
@@ -359,6 +371,16 @@ class LocalPlanner:
                     f"the body passes {float(gap.min()) * 1000:.1f} mm above the terrain at "
                     f"sample {k} of the path (less than {BODY_CLEARANCE_M * 1000:.0f} mm)"
                 )
+        links = leg_links(self.robot)
+        for k, s in enumerate(path):
+            q = self.robot.q_from(s.base_position_W, s.base_quaternion_xyzw, s.joints_rad)
+            clear = links.clearance_fast(self.terrain, q)
+            c = int(np.argmin(clear))
+            if clear[c] < LEG_CLEARANCE_M:
+                return (
+                    f"the {links.describe(c)} passes {clear[c] * 1000:.1f} mm above the terrain "
+                    f"at sample {k} of the path (less than {LEG_CLEARANCE_M * 1000:.0f} mm)"
+                )
         for k, s in enumerate(path[1:-1], start=1):
             sup = np.flatnonzero(s.in_contact)
             normals = self.terrain.normal(s.feet_W)
@@ -376,7 +398,29 @@ class LocalPlanner:
                     f"balance lost at sample {k} of the path (friction-cone margin "
                     f"{res.margin_N:.2f} N < {need:.2f} N): the COM leaves the support"
                 )
+        for k, s in enumerate(path):
+            q = self.robot.q_from(s.base_position_W, s.base_quaternion_xyzw, s.joints_rad)
+            sup = np.flatnonzero(s.in_contact)
+            tq = self.torques.solve(q, sup, self.mu, self.terrain.normal(s.feet_W))
+            if not tq.ratio <= TORQUE_FRACTION:
+                j = max(tq.worst_joint, 0)
+                return (
+                    f"joint {self.robot.joint_names[j]} needs {100 * tq.ratio:.0f} % of its "
+                    f"effort limit at sample {k} of the path (more than "
+                    f"{100 * TORQUE_FRACTION:.0f} %)"
+                )
         return ""
+
+    def path_end(self, path: list[State], support: tuple[int, ...]) -> State:
+        """The last sample of a path as the keyframe it ends on (:func:`end_keyframe`).
+
+        The stance feet roll along the path (:mod:`planner.rolling`), so the path ends with
+        the keyframe's pose on feet a few millimetres from the Theta solution's; its joints
+        are the path's (IK onto the rolled feet) and its forces are solved again for them.
+        """
+        end = end_keyframe(self.robot, path, support, self.check.com_W(path[-1]))
+        path[-1] = end
+        return end
 
     def stride_m(self) -> float:
         """Stride of Lambda_t [m]: ``settings.step_m`` or 0.35 x the shortest leg reach."""

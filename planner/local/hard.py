@@ -24,7 +24,7 @@ import numpy as np
 
 from planner.heuristics import reference_directions
 from planner.interpolate import interpolate_leaf
-from planner.local.base import LocalPlanner, Step, Walk, _Run
+from planner.local.base import TORQUE_FRACTION, LocalPlanner, Step, Walk, _Run
 from planner.problems import Theta1
 from planner.search import omega
 from planner.state import State
@@ -52,6 +52,17 @@ class HardPlanner(LocalPlanner):
             )
         return self._theta1[key]
 
+    def holds_on_three(self, state: State, leg: int) -> bool:
+        """With ``leg`` lifted, the joint torques stay within ``TORQUE_FRACTION`` of the limits.
+
+        Theta1 pins the COM on tau and knows nothing of the motors; a pose that needs a
+        knee at its effort limit once the leg lifts cannot be held by the servos.
+        """
+        sup = [i for i in range(4) if i != leg]
+        q = self.robot.q_from(state.base_position_W, state.base_quaternion_xyzw, state.joints_rad)
+        res = self.torques.solve(q, sup, self.mu, self.terrain.normal(state.feet_W))
+        return bool(res.ratio <= TORQUE_FRACTION)
+
     def search_body(self, state: State, leg: int, tau: Trajectory, stride_m: float, target_W):
         """Omega_1 for the body move before ``leg`` swings: (Theta1 solution, lambda) or None.
 
@@ -67,6 +78,9 @@ class HardPlanner(LocalPlanner):
             u_f, u_n = reference_directions(tau, self.terrain, rc, lam=lam)
             sol = problem.solve(state, rc, u_f, u_n, target_W)
             self._count("theta1", sol.feasible)
+            if sol.feasible and not self.holds_on_three(sol.state, leg):
+                sol.feasible = False
+                sol.diagnosis = "the three-leg stance needs joint torques near the limits"
             if not sol.feasible:
                 last = sol
                 continue
@@ -78,7 +92,7 @@ class HardPlanner(LocalPlanner):
             )
             self.stats["theta1"][0] += res.solves
             self.stats["theta1"][1] += len(res.xi)
-            if res.best is not None and res.best[1] > lam:
+            if res.best is not None and res.best[1] > lam and self.holds_on_three(res.best[0], leg):
                 best_state, best_lam = res.best
                 sol.state = best_state
                 return sol, best_lam
@@ -100,6 +114,7 @@ class HardPlanner(LocalPlanner):
         why = self.path_problem(body_path)
         if why:
             return Step(leg, False, state, None, None, [], [], "body_move", f"Omega_1: {why}")
+        moved = self.path_end(body_path, moved.support)
         sol3, swing_path = self.swing(moved, leg, tau, stride_m, target)
         if not sol3.feasible:
             return Step(

@@ -1,0 +1,358 @@
+"""Seeded random courses: rough relief, steps, trenches, stairs and stepping stones.
+
+:func:`generate_course` draws a terrain spec of kind ``course`` (the format of
+``terrains/course_rough.yaml``, built by :meth:`planner.terrain.Terrain.from_spec`) from
+``numpy.random.default_rng(seed)``. Along x (metres, world frame):
+
+- ``x_min`` (-0.5) to ``FLAT_START_END_M`` (0.6): flat, where the robot starts (x = 0.2);
+- 0.6 to ``length_m``: features in random order, each in its own segment with flat
+  margins, drawn from a shuffled deck of the five kinds (reshuffled when used up; a kind
+  whose segment no longer fits is skipped, and what is left stays flat):
+
+  ``rough`` relief of amplitude up to ``MAX_RELIEF_M`` (6 cm), ``step`` up or down by up to
+  ``MAX_STEP_M`` (8 cm), ``gap`` (a trench) up to ``MAX_GAP_WIDTH_M`` (8 cm) wide and
+  ``MAX_STEP_M`` deep, ``stairs`` of 2-3 steps up or down with rises up to
+  ``MAX_STAIR_RISE_M`` (6 cm), ``stepping_stones`` in a pit whose floor is at most
+  ``MAX_STEP_M`` below a stone's top; so no edge anywhere is higher than 8 cm;
+- ``length_m`` to ``length_m + FLAT_END_M`` (0.4): flat, the goal's landing, so a walk's
+  goal is (``length_m``, 0) = the course's end minus 0.4 m (:func:`course_goal_xy`).
+
+Levels stack (a step or stairs leaves the ground higher or lower for what follows; see
+:mod:`planner.terrain`); the sign of each level change is chosen so that the ground stays
+within ``MAX_LEVEL_M`` of the start. ``difficulty`` d in [0, 1] scales every size (heights,
+depths, widths, amplitudes, stone gaps and jitter): a feature's size is
+easy + d * u * (maximum - easy), u ~ U(0.6, 1) (``_SIZES``). Every course keeps friction 0.7
+(rubber on wood or plastic, as the named courses), ``x_min`` -0.5 and y in [-0.6, 0.6].
+
+A generated course is named ``gen:SEED`` (difficulty 1, length 3 m) or
+``gen:SEED:DIFFICULTY[:LENGTH]``; :func:`write_course` writes it as YAML, which
+``stratawalk plan --terrain`` and batch jobs accept as a path.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from planner.errors import InputError
+
+__all__ = [
+    "FEATURE_KINDS",
+    "add_generate_parser",
+    "cmd_generate",
+    "course_goal_xy",
+    "course_name",
+    "generate_course",
+    "generated_course_names",
+    "parse_course_name",
+    "write_course",
+]
+
+FEATURE_KINDS = ("rough", "step", "gap", "stairs", "stepping_stones")
+FRICTION = 0.7
+X_MIN_M = -0.5
+Y_MIN_M, Y_MAX_M = -0.6, 0.6
+FLAT_START_END_M = 0.6  # the course is flat from x_min to here
+FLAT_END_M = 0.4  # flat after the features
+DEFAULT_LENGTH_M = 3.0
+MIN_LENGTH_M = 1.0
+MAX_RELIEF_M = 0.06
+MAX_STEP_M = 0.08
+MAX_GAP_WIDTH_M = 0.08
+MAX_STAIR_RISE_M = 0.06
+MAX_LEVEL_M = 0.2  # |ground level| stays below this
+_MIN_FEATURE_M = 0.45  # the shortest feature segment (step, gap)
+_PREFIX = "gen"
+
+# (easy, hardest) of each size; difficulty d picks easy + d * u * (hardest - easy), u ~ U(0.6, 1)
+_SIZES = {
+    # the rough kind scales its max |z| on a grid of wavelength / 10; between the nodes the
+    # relief rises up to ~3 % higher: 4 % of margin keeps the true peak within MAX_RELIEF_M
+    "relief_m": (0.01, MAX_RELIEF_M / 1.04),
+    "step_m": (0.02, MAX_STEP_M),
+    "gap_width_m": (0.02, MAX_GAP_WIDTH_M),
+    "drop_m": (0.04, MAX_STEP_M),  # a trench's depth; a pit's floor below a stone's top
+    "stair_rise_m": (0.02, MAX_STAIR_RISE_M),
+    "stair_run_m": (0.30, 0.20),
+    "stone_size_m": (0.14, 0.09),
+    "stone_gap_m": (0.02, 0.05),
+    "stone_jitter_m": (0.0, 0.02),
+}
+
+
+def _size(rng: np.random.Generator, key: str, difficulty: float) -> float:
+    easy, hard = _SIZES[key]
+    return float(easy + difficulty * rng.uniform(0.6, 1.0) * (hard - easy))
+
+
+def _seed(rng: np.random.Generator) -> int:
+    return int(rng.integers(0, 2**31 - 1))
+
+
+def _signed(rng: np.random.Generator, level_m: float, change_m: float) -> float:
+    """``change_m`` up or down at random, down (up) if up (down) would leave MAX_LEVEL_M."""
+    sign = 1.0 if rng.random() < 0.5 else -1.0
+    if abs(level_m + sign * change_m) > MAX_LEVEL_M:
+        sign = -sign
+    return sign * change_m
+
+
+def _r(v: float) -> float:
+    """Rounded to 0.1 mm, for a readable YAML."""
+    return round(float(v), 4)
+
+
+def _feature(kind: str, rng: np.random.Generator, d: float, level_m: float) -> dict[str, Any]:
+    """One segment of ``kind`` (with its ``length``), drawn at difficulty ``d``.
+
+    Level changes start 0.15 m into the segment and leave at least 0.25 m flat after them.
+    """
+    if kind == "rough":
+        amp = _size(rng, "relief_m", d)
+        wl = max(0.15, 5.0 * amp)  # rough2cm: 0.15-0.6 m; 6 cm: 0.3-1.2 m
+        length = rng.uniform(0.5, 0.8)
+        return {  # inset 5 cm: the taper's tails are below 3 um outside the segment
+            "kind": "rough",
+            "length": _r(length),
+            "amplitude": _r(amp),
+            "wavelength": _r(wl),
+            "wavelength_max": _r(4.0 * wl),
+            "seed": _seed(rng),
+            "x_start": 0.05,
+            "x_end": _r(length - 0.05),
+            "taper": 0.15,
+        }
+    if kind == "step":
+        return {
+            "kind": "step",
+            "length": _r(rng.uniform(0.45, 0.6)),
+            "x": 0.15,
+            "height": _r(_signed(rng, level_m, _size(rng, "step_m", d))),
+        }
+    if kind == "gap":
+        return {
+            "kind": "gap",
+            "length": _r(rng.uniform(0.45, 0.6)),
+            "x_start": 0.15,
+            "width": _r(_size(rng, "gap_width_m", d)),
+            "depth": _r(_size(rng, "drop_m", d)),
+        }
+    if kind == "stairs":
+        count = int(rng.integers(2, 4))
+        rise = _size(rng, "stair_rise_m", d)
+        run = _r(_size(rng, "stair_run_m", d))
+        return {
+            "kind": "stairs",
+            "length": _r(0.15 + count * run + 0.1),
+            "x_start": 0.15,
+            "rise": _r(_signed(rng, level_m, count * rise) / count),
+            "run": run,
+            "count": count,
+        }
+    if kind == "stepping_stones":
+        # 3-5 columns of stones; the pit is as long as they are plus one gap at each end,
+        # so it is no wider than a stone gap anywhere along x (the kind centres its grid)
+        count = int(rng.integers(3, 6))
+        size = _r(_size(rng, "stone_size_m", d))
+        gap = _r(_size(rng, "stone_gap_m", d))
+        pit = _r(count * (size + gap) + gap + 0.001)
+        jitter = _r(_size(rng, "stone_jitter_m", d))
+        return {
+            "kind": "stepping_stones",
+            "length": _r(pit + 0.25),
+            "x_start": 0.15,
+            "x_end": _r(0.15 + pit),
+            "y_start": Y_MIN_M,
+            "y_end": Y_MAX_M,
+            "size": size,
+            "gap": gap,
+            "height": 0.0,
+            "height_jitter": jitter,
+            "depth": _r(_size(rng, "drop_m", d) - jitter),  # pit floor to the highest top
+            "seed": _seed(rng),
+        }
+    raise InputError(f"feature kind: unknown '{kind}'; use one of {', '.join(FEATURE_KINDS)}")
+
+
+def _level_change(seg: dict[str, Any]) -> float:
+    if seg["kind"] == "step":
+        return seg["height"]
+    if seg["kind"] == "stairs":
+        return seg["rise"] * seg["count"]
+    return 0.0
+
+
+def _check_args(seed: Any, length_m: float, difficulty: float) -> None:
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise InputError(f"--seed: expected an integer >= 0, got {seed!r}")
+    if not (isinstance(difficulty, (int, float)) and 0.0 <= difficulty <= 1.0):
+        raise InputError(f"--difficulty: must be in [0, 1], got {difficulty!r}")
+    if not (isinstance(length_m, (int, float)) and math.isfinite(length_m)):
+        raise InputError(f"--length: expected metres, got {length_m!r}")
+    if length_m < MIN_LENGTH_M:
+        raise InputError(f"--length: must be >= {MIN_LENGTH_M} m, got {length_m}")
+
+
+def generate_course(seed: int, length_m: float = DEFAULT_LENGTH_M, difficulty: float = 1.0) -> dict:
+    """A random course spec (kind ``course``), the same for the same arguments.
+
+    Parameters
+    ----------
+    seed
+        Seed of ``numpy.random.default_rng`` (integer >= 0).
+    length_m
+        x where the features end and the final 0.4 m of flat ground begins (the goal of a
+        walk over the course); features start at x = 0.6 m. At least 1 m.
+    difficulty
+        In [0, 1]: 0 gives the easy sizes, 1 up to the maxima (module docstring).
+
+    Returns
+    -------
+    dict
+        A terrain spec for :meth:`planner.terrain.Terrain.from_spec`, named by
+        :func:`course_name`.
+
+    Raises
+    ------
+    InputError
+        A bad argument (the message names the command-line option).
+
+    """
+    _check_args(seed, length_m, difficulty)
+    rng = np.random.default_rng(int(seed))
+    d = float(difficulty)
+    segments: list[dict[str, Any]] = [{"kind": "flat", "length": FLAT_START_END_M - X_MIN_M}]
+    x, level, deck, placed = FLAT_START_END_M, 0.0, [], []
+    while x + _MIN_FEATURE_M <= length_m + 1e-9:
+        if not deck:
+            deck = [str(k) for k in rng.permutation(FEATURE_KINDS)]
+        seg = _feature(deck.pop(0), rng, d, level)
+        if x + seg["length"] > length_m + 1e-9:
+            continue  # does not fit in what is left: try the next kind
+        segments.append(seg)
+        placed.append(seg["kind"])
+        x += seg["length"]
+        level += _level_change(seg)
+    segments.append({"kind": "flat", "length": round(length_m - x + FLAT_END_M, 4)})
+    total = sum(s["length"] for s in segments)
+    return {
+        "name": course_name(seed, difficulty, length_m),
+        "description": (
+            f"Generated course (planner.course_gen), seed {seed}, difficulty {d:g}: flat to "
+            f"x = {FLAT_START_END_M} m, then {', '.join(placed) or 'nothing'}, flat from "
+            f"x = {length_m:g} m."
+        ),
+        "friction": FRICTION,
+        "x_min": X_MIN_M,
+        "y_min": Y_MIN_M,
+        "y_max": Y_MAX_M,
+        "kind": "course",
+        "segments": segments,
+        "length": round(total, 6),
+    }
+
+
+def course_goal_xy(spec: dict) -> tuple[float, float]:
+    """The goal of a walk over a generated course: (its end minus 0.4 m, 0)."""
+    return (round(spec["x_min"] + spec["length"] - FLAT_END_M, 6), 0.0)
+
+
+# ------------------------------------------------------------------------------ names
+def course_name(seed: int, difficulty: float = 1.0, length_m: float = DEFAULT_LENGTH_M) -> str:
+    """``gen:SEED`` at the defaults, else ``gen:SEED:DIFFICULTY`` or ``...:LENGTH``."""
+    if length_m != DEFAULT_LENGTH_M:
+        return f"{_PREFIX}:{seed}:{difficulty:g}:{length_m:g}"
+    if difficulty != 1.0:
+        return f"{_PREFIX}:{seed}:{difficulty:g}"
+    return f"{_PREFIX}:{seed}"
+
+
+def generated_course_names(n: int, seed0: int = 0, difficulty: float = 1.0) -> list[str]:
+    """Names of the generated courses of seeds ``seed0 .. seed0 + n - 1``."""
+    return [course_name(s, difficulty) for s in range(seed0, seed0 + n)]
+
+
+def parse_course_name(name: str) -> tuple[int, float, float] | None:
+    """(seed, difficulty, length_m) of ``gen:SEED[:DIFFICULTY[:LENGTH]]``; None if not one.
+
+    Raises
+    ------
+    InputError
+        A ``gen:`` name whose numbers are malformed.
+
+    """
+    parts = str(name).split(":")
+    if parts[0] != _PREFIX or len(parts) < 2:
+        return None
+    if len(parts) > 4:
+        raise InputError(f"course '{name}': expected gen:SEED[:DIFFICULTY[:LENGTH]]")
+    try:
+        seed = int(parts[1])
+        difficulty = float(parts[2]) if len(parts) > 2 else 1.0
+        length_m = float(parts[3]) if len(parts) > 3 else DEFAULT_LENGTH_M
+    except ValueError:
+        raise InputError(
+            f"course '{name}': expected gen:SEED[:DIFFICULTY[:LENGTH]] with numbers"
+        ) from None
+    _check_args(seed, length_m, difficulty)
+    return seed, difficulty, length_m
+
+
+def write_course(spec_or_name: dict | str, path: str | Path) -> Path:
+    """Write a generated spec (or the course of a ``gen:...`` name) as YAML; its path.
+
+    ``path`` is a file, or an existing folder (the file is then ``gen_SEED....yaml`` in it).
+    """
+    spec = spec_or_name
+    if isinstance(spec_or_name, str):
+        parsed = parse_course_name(spec_or_name)
+        if parsed is None:
+            raise InputError(f"course '{spec_or_name}': not a generated course name (gen:SEED)")
+        spec = generate_course(parsed[0], parsed[2], parsed[1])
+    out = Path(path)
+    if out.is_dir():
+        out = out / (spec["name"].replace(":", "_") + ".yaml")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(yaml.safe_dump(spec, sort_keys=False, width=90), encoding="utf-8")
+    return out
+
+
+# ------------------------------------------------------------------------------ command line
+def add_generate_parser(subparsers) -> argparse.ArgumentParser:
+    """Add ``generate-course --seed S [--difficulty D] [--length L] --out course.yaml``."""
+    g = subparsers.add_parser(
+        "generate-course", help="write a seeded random course (steps, gaps, stairs, ...) as YAML"
+    )
+    g.add_argument("--seed", type=int, required=True, help="random seed (integer >= 0)")
+    g.add_argument("--difficulty", type=float, default=1.0, help="0 (easy) .. 1 (maxima)")
+    g.add_argument(
+        "--length", type=float, default=DEFAULT_LENGTH_M, help="[m] x where the features end"
+    )
+    g.add_argument("--out", required=True, help="YAML file (or an existing folder)")
+    g.add_argument("--png", help="also draw a top view to this PNG")
+    g.set_defaults(func=cmd_generate)
+    return g
+
+
+def cmd_generate(args) -> int:
+    """Run ``stratawalk generate-course``: write the spec, check that it loads."""
+    from planner.terrain import load_terrain
+
+    path = write_course(generate_course(args.seed, args.length, args.difficulty), args.out)
+    terrain = load_terrain(path)
+    kinds = [s["kind"] for s in terrain.spec["segments"][1:-1]]
+    print(
+        f"wrote {path}: {terrain.name}, bounds {terrain.bounds}, features {', '.join(kinds)}; "
+        f"walk to {course_goal_xy(terrain.spec)}"
+    )
+    if args.png:
+        from planner.terrain_plot import plot_top_view
+
+        plot_top_view(terrain, args.png)
+        print(f"wrote {args.png}")
+    return 0

@@ -1,0 +1,185 @@
+"""Rolling sphere feet: the leaves of the strata as the physics has them (sections 4.3, 7.1).
+
+The paper's leaves keep each stance foot's contact point fixed. A LittleDog foot is a
+rigid sphere (radius rho) fixed to the shank, and a foot that does not *slide* must
+*roll*: when the shank turns by the rotation vector w (world frame), the material point
+touching the ground stays still, so the sphere centre moves by
+
+    delta_c = rho w x n                                   (n: terrain normal at the contact)
+
+and the contact point moves with it along the surface. Measured in MuJoCo before this
+model (section 10, the executor's sliding metric): a stance foot's centre travelled 2-4 mm
+per body move while its contact point slid < 0.5 mm, and open-loop walks ended 6 cm per
+metre from their planned end (the plan's joints were solved for fixed centres that the
+real feet did not keep). Holding the contact point still instead (rolling friction, a
+torsional stop) is not what a rubber ball on a shank does, so the planner models rolling.
+
+*Sliding* is what no-slip forbids, and one definition serves the planner, the validator
+and the simulator: the tangential part of the centre's travel minus the rolling,
+
+    sliding = P_n (delta_c - rho w x n),   P_n = I - n n^T,
+
+per pair of consecutive samples in :func:`planner.validate.check_plan` (``stance_slip``,
+rotations from Pinocchio) and integrated over time in :class:`planner.simulate.Monitor`
+(velocity of the sphere's material point at the contact). The normal part is whether the
+sphere still rests on the terrain (``foot_on_terrain``).
+
+:func:`roll_stance_feet` moves the stance feet of one interpolation sample
+(:mod:`planner.interpolate`): the shank rotation depends on the joints, the joints on the
+centres (IK), so the two are iterated to a fixed point (contraction ~rho / leg length).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+import pinocchio as pin
+from numpy.typing import NDArray
+
+from planner.contact import TerrainLike
+
+if TYPE_CHECKING:
+    from planner.kinematics import LegKinematics
+
+__all__ = [
+    "end_keyframe",
+    "leg_rotations_W",
+    "roll_stance_feet",
+    "rolling_displacement",
+    "sliding",
+]
+
+_Array = NDArray[np.float64]
+FIXED_POINT_ITERATIONS = 8  # error x (rho / leg length)^k per iteration (0.06^k, LittleDog)
+CONVERGED_M = 1e-9  # centre change [m] that ends the iteration (check's slip limit: 1e-6)
+REST_ITERATIONS = 4  # Newton steps putting a rolled centre back on the offset surface
+
+
+def _rot(axis: _Array, angle: float) -> _Array:
+    return np.asarray(pin.exp3(np.asarray(axis, float) * float(angle)))
+
+
+def leg_rotations_W(kin: LegKinematics, base_rotation_W: _Array, joints_rad: _Array) -> _Array:
+    """(4, 3, 3) world orientation of each shank (up to its constant zero-pose rotation).
+
+    Product of exponentials (eq. 1) of the leg's joint axes (body frame, zero pose) times
+    the base rotation; only relative rotations are used, so the constant cancels.
+    """
+    out = np.empty((4, 3, 3))
+    jr = np.asarray(joints_rad, float).reshape(4, 3)
+    for i, leg in enumerate(kin.legs):
+        R = np.asarray(base_rotation_W, float)
+        for j in range(3):
+            R = R @ _rot(leg.axes_B[j], jr[i, j])
+        out[i] = R
+    return out
+
+
+def rolling_displacement(R_prev: _Array, R_now: _Array, normal_W: _Array, radius_m: float):
+    """Centre displacement rho w x n of spheres turned from ``R_prev`` to ``R_now``.
+
+    ``R_*`` (..., 3, 3) world orientations, ``normal_W`` (..., 3); w is the world-frame
+    rotation vector of ``R_now R_prev^T``.
+    """
+    Rp = np.asarray(R_prev, float).reshape(-1, 3, 3)
+    Rn = np.asarray(R_now, float).reshape(-1, 3, 3)
+    n = np.asarray(normal_W, float).reshape(-1, 3)
+    w = np.array([np.asarray(pin.log3(a @ b.T)) for a, b in zip(Rn, Rp, strict=True)])
+    return float(radius_m) * np.cross(w, n)
+
+
+def sliding(c_prev, c_now, R_prev, R_now, normal_W, radius_m: float) -> _Array:
+    """(N,) sliding [m] of stance feet between two samples: |P_n (delta_c - rho w x n)|."""
+    n = np.asarray(normal_W, float).reshape(-1, 3)
+    d = np.asarray(c_now, float).reshape(-1, 3) - np.asarray(c_prev, float).reshape(-1, 3)
+    res = d - rolling_displacement(R_prev, R_now, n, radius_m)
+    res = res - np.sum(res * n, axis=1, keepdims=True) * n
+    return np.linalg.norm(res, axis=1)
+
+
+def _rest(terrain: TerrainLike, c: _Array, n_dir: _Array, rho: float) -> tuple[_Array, _Array]:
+    """Move centres along ``n_dir`` until their spheres rest on the terrain; (centres, contacts).
+
+    The contact point r = c - rho n(r) (fixed point from the normal at ``c - rho n_dir``)
+    lies on the surface when the sphere rests; its height over the surface along the
+    normal, f_T(r) n_z, is the gap closed by each Newton step.
+    """
+    c = c.copy()
+    r = c - rho * n_dir
+    for _ in range(REST_ITERATIONS):
+        n = np.asarray(terrain.normal(r), float).reshape(-1, 3)
+        r = c - rho * n
+        n = np.asarray(terrain.normal(r), float).reshape(-1, 3)
+        gap = np.asarray(terrain.f_T(r), float).reshape(-1) * n[:, 2]  # > 0: above resting
+        c = c - (gap / np.maximum(np.sum(n * n_dir, axis=1), 0.5))[:, None] * n_dir
+        r = c - rho * n
+        if float(np.max(np.abs(gap))) < 1e-12:
+            break
+    return c, r
+
+
+def roll_stance_feet(
+    kin: LegKinematics,
+    terrain: TerrainLike,
+    base_position_W: _Array,
+    base_rotation_W: _Array,
+    centres_prev_W: _Array,
+    contacts_prev_W: _Array,
+    rotations_prev_W: _Array,
+    stance: list[int],
+    centres_W: _Array,
+    reference_rad: _Array,
+):
+    """Stance feet of the next sample, rolled from the previous one (module docstring).
+
+    ``centres_W`` (4, 3) holds every foot's centre for this sample (swing feet as
+    planned, stance feet as a first guess); ``*_prev_W`` describe the previous sample.
+    Returns (centres (4, 3), contacts of the stance feet (len(stance), 3), IK results,
+    leg rotations (4, 3, 3)).
+    """
+    rho = kin.robot.foot_radius_m
+    c = np.array(centres_W, float)
+    s = list(stance)
+    n_prev = np.asarray(terrain.normal(contacts_prev_W[s]), float).reshape(-1, 3)
+    R_W = np.asarray(base_rotation_W, float)
+    p_W = np.asarray(base_position_W, float)
+    results = kin.ik(p_W, R_W, c, reference_rad=reference_rad)  # swing legs once
+    ref = np.asarray(reference_rad, float).reshape(4, 3)
+    for _ in range(FIXED_POINT_ITERATIONS):
+        joints = np.array([r.joints_rad for r in results])
+        R_now = leg_rotations_W(kin, R_W, joints)
+        moved = centres_prev_W[s] + rolling_displacement(rotations_prev_W[s], R_now[s], n_prev, rho)
+        change = float(np.max(np.abs(moved - c[s])))
+        c[s] = moved
+        for i in s:  # stance legs onto their rolled centres
+            results[i] = kin.ik_leg(i, (c[i] - p_W) @ R_W, ref[i])
+        if change < CONVERGED_M:
+            break
+    # the tangential rolling leaves a sphere O(curvature x step^2) off a curved terrain:
+    # put it back along n (its rotation changes by ~1e-5 rad, its rolling by ~1e-7 m)
+    c[s], contacts = _rest(terrain, c[s], n_prev, rho)
+    for i in s:
+        results[i] = kin.ik_leg(i, (c[i] - p_W) @ R_W, ref[i])
+    joints = np.array([r.joints_rad for r in results])
+    return c, contacts, results, leg_rotations_W(kin, R_W, joints)
+
+
+def end_keyframe(robot, path: list, support, com_W=None):
+    """The last state of a rolled path as a keyframe: ``support`` and its eq. 5 forces.
+
+    Along a path the stance feet roll, so the path ends on feet a few millimetres from
+    the Theta solution it was interpolated to; the keyframe is that last sample, with the
+    equilibrating forces (eq. 5) solved again for its feet and COM (``com_W``, default the
+    whole-body COM by Pinocchio). Returns a copy; ``path`` is not changed.
+    """
+    from planner.statics import equilibrating_forces
+
+    end = path[-1].copy()
+    end.support = tuple(int(i) for i in support)
+    if com_W is None:
+        q = robot.q_from(end.base_position_W, end.base_quaternion_xyzw, end.joints_rad)
+        com_W = np.asarray(pin.centerOfMass(robot.model, robot.model.createData(), q))
+    eq = equilibrating_forces(end.feet_W, com_W, robot.total_mass_kg, end.support)
+    end.forces_W = None if eq.degenerate else eq.forces
+    return end

@@ -1,0 +1,164 @@
+"""Joint torques of a quasi-static stance: can the motors hold it? (beyond the paper, section 10).
+
+Eq. 3-5 and the friction cones say whether *forces* exist that hold the robot still; the
+motors must also produce the joint torques those forces need. In static equilibrium
+(Pinocchio's free-flyer dynamics with zero velocity and acceleration)
+
+    g(q) = sum_i J_i(q)^T f_i + S^T tau,
+
+with g the generalized gravity of every link (``pinocchio.computeGeneralizedGravity``),
+J_i the Jacobian of the contact point r_i = c_i - rho n_i (world-aligned linear part,
+from the foot frame's ``LOCAL_WORLD_ALIGNED`` Jacobian moved from the sphere centre to the
+contact point), f_i the contact force and tau the 12 joint torques. The 6 base rows are
+the balance of eq. 4; the joint rows give tau. :func:`torque_feasibility` solves, over
+all forces in the exact friction cones that balance the robot (an SOCP, Clarabel as in
+:mod:`planner.statics`),
+
+    min_f  max_j |tau_j(f)| / effort_j,
+
+so ``ratio`` <= 1 means some admissible force distribution needs no joint beyond its URDF
+effort limit (LittleDog: 1.7 N m hips, 0.6 N m knees). Joints without a finite, positive
+effort limit are not constrained.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import clarabel
+import numpy as np
+import pinocchio as pin
+import scipy.sparse as sp
+from numpy.typing import NDArray
+
+from planner.statics import _tangent_bases
+
+if TYPE_CHECKING:
+    from planner.robot import Robot
+
+__all__ = ["TorqueCheck", "TorqueFeasibility", "joint_efforts_nm"]
+
+_Array = NDArray[np.float64]
+_SOLVED = ("Solved", "AlmostSolved")
+
+
+@dataclass
+class TorqueFeasibility:
+    """Outcome of :meth:`TorqueCheck.solve` at one configuration.
+
+    ``ratio``: least achievable max_j |tau_j| / effort_j (inf when no force distribution
+    in the cones balances the robot, nan when the solver failed); ``torques_nm`` (12,) in
+    the robot's joint order for that distribution; ``forces_W`` (4, 3) [N];
+    ``worst_joint``: robot joint index of the largest ratio; ``status``: Clarabel's.
+    """
+
+    ratio: float
+    torques_nm: _Array
+    forces_W: _Array
+    worst_joint: int
+    status: str
+
+    @property
+    def feasible(self) -> bool:
+        """Some admissible forces keep every joint within its effort limit."""
+        return bool(self.ratio <= 1.0)
+
+
+def joint_efforts_nm(robot: Robot) -> _Array:
+    """(12,) URDF effort limits [N m] in the robot's joint order (inf where none is given)."""
+    m = robot.model
+    out = []
+    for name in robot.joint_names:
+        e = float(m.effortLimit[m.joints[m.getJointId(name)].idx_v])
+        out.append(e if math.isfinite(e) and 0.0 < e < 1e6 else math.inf)
+    return np.array(out)
+
+
+class TorqueCheck:
+    """Joint-torque feasibility of stances of one robot (module docstring)."""
+
+    def __init__(self, robot: Robot):
+        self.robot = robot
+        self.model = robot.model
+        self.data = self.model.createData()
+        self.foot_ids = [self.model.getFrameId(f) for f in robot.foot_frames]
+        self.v_idx = np.array(
+            [self.model.joints[self.model.getJointId(n)].idx_v for n in robot.joint_names]
+        )
+        self.effort = joint_efforts_nm(robot)
+
+    def solve(self, q: _Array, support, mu: float, normals_W: _Array) -> TorqueFeasibility:
+        """Torque feasibility at Pinocchio ``q`` on the feet ``support`` (0-based legs).
+
+        ``normals_W`` (4, 3): terrain normals at the contacts; ``mu``: friction coefficient.
+        """
+        model, data = self.model, self.data
+        q = np.asarray(q, float)
+        sup = [int(i) for i in support]
+        k = len(sup)
+        rho = self.robot.foot_radius_m
+        n = np.asarray(normals_W, float).reshape(4, 3)[sup]
+        g = pin.computeGeneralizedGravity(model, data, q)
+        pin.computeJointJacobians(model, data, q)
+        pin.updateFramePlacements(model, data)
+        jac = np.zeros((3 * k, model.nv))  # contact-point Jacobians, stacked
+        for j, i in enumerate(sup):
+            J = pin.getFrameJacobian(model, data, self.foot_ids[i], pin.LOCAL_WORLD_ALIGNED)
+            d = -rho * n[j]  # contact point minus sphere centre
+            hat = np.array([[0, -d[2], d[1]], [d[2], 0, -d[0]], [-d[1], d[0], 0]])
+            jac[3 * j : 3 * j + 3] = J[:3] - hat @ J[3:]
+        jt = jac.T  # (nv, 3k): generalized force of the contact forces
+        base = [r for r in range(model.nv) if r not in set(self.v_idx.tolist())]
+        limited = [c for c in range(12) if math.isfinite(self.effort[c])]
+        nv = 3 * k + 1  # forces, then s
+        rows, b, cones = [], [], []
+        a_eq = np.zeros((len(base), nv))
+        a_eq[:, : 3 * k] = jt[base]
+        rows.append(a_eq)
+        b.append(g[base])
+        cones.append(clarabel.ZeroConeT(len(base)))
+        # |g_j - (J^T f)_j| <= s e_j  <=>  -(J^T f)_j - e_j s <= -g_j, (J^T f)_j - e_j s <= g_j
+        a_t = np.zeros((2 * len(limited), nv))
+        b_t = np.zeros(2 * len(limited))
+        for r, c in enumerate(limited):
+            v = self.v_idx[c]
+            a_t[2 * r, : 3 * k], a_t[2 * r, -1], b_t[2 * r] = -jt[v], -self.effort[c], -g[v]
+            a_t[2 * r + 1, : 3 * k], a_t[2 * r + 1, -1], b_t[2 * r + 1] = (
+                jt[v],
+                -self.effort[c],
+                g[v],
+            )
+        rows.append(a_t)
+        b.append(b_t)
+        cones.append(clarabel.NonnegativeConeT(len(b_t)))
+        t1, t2 = _tangent_bases(n)
+        a_c = np.zeros((3 * k, nv))
+        for j in range(k):
+            a_c[3 * j, 3 * j : 3 * j + 3] = -mu * n[j]
+            a_c[3 * j + 1, 3 * j : 3 * j + 3] = -t1[j]
+            a_c[3 * j + 2, 3 * j : 3 * j + 3] = -t2[j]
+        rows.append(a_c)
+        b.append(np.zeros(3 * k))
+        cones += [clarabel.SecondOrderConeT(3) for _ in range(k)]
+        cost = np.zeros(nv)
+        cost[-1] = 1.0
+        settings = clarabel.DefaultSettings()
+        settings.verbose = False
+        solver = clarabel.DefaultSolver(
+            sp.csc_matrix((nv, nv)), cost, sp.csc_matrix(np.vstack(rows)), np.concatenate(b),
+            cones, settings,
+        )  # fmt: skip
+        res = solver.solve()
+        status = str(res.status)
+        forces = np.zeros((4, 3))
+        if status in _SOLVED:
+            x = np.asarray(res.x)
+            forces[sup] = x[: 3 * k].reshape(k, 3)
+            tau = g[self.v_idx] - jt[self.v_idx] @ x[: 3 * k]
+            ratios = np.abs(tau) / self.effort
+            worst = int(np.argmax(ratios))
+            return TorqueFeasibility(float(ratios[worst]), tau, forces, worst, status)
+        ratio = math.inf if "Infeasible" in status else math.nan
+        return TorqueFeasibility(ratio, np.full(12, np.nan), forces, -1, status)

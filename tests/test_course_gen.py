@@ -1,0 +1,185 @@
+import numpy as np
+import pytest
+import yaml
+
+from planner.cli import main
+from planner.course_gen import (
+    FEATURE_KINDS,
+    MAX_GAP_WIDTH_M,
+    MAX_RELIEF_M,
+    MAX_STAIR_RISE_M,
+    MAX_STEP_M,
+    course_goal_xy,
+    course_name,
+    generate_course,
+    generated_course_names,
+    parse_course_name,
+    write_course,
+)
+from planner.errors import InputError
+from planner.terrain import Terrain, load_terrain
+
+SEEDS = range(31)
+DX_M = 0.001
+
+
+def _segments(spec):
+    """(x0, x1, level before, segment) for every segment of a course spec, world x."""
+    out, x, level = [], spec["x_min"], 0.0
+    for seg in spec["segments"]:
+        out.append((x, x + seg["length"], level, seg))
+        x += seg["length"]
+        if seg["kind"] == "step":
+            level += seg["height"]
+        elif seg["kind"] == "stairs":
+            level += seg["rise"] * seg["count"]
+    return out
+
+
+@pytest.fixture(scope="module")
+def courses():
+    return {s: (spec := generate_course(s), Terrain.from_spec(spec)) for s in SEEDS}
+
+
+def test_same_seed_same_course_different_seeds_differ():
+    assert generate_course(7) == generate_course(7)
+    assert generate_course(7, 2.0, 0.3) == generate_course(7, 2.0, 0.3)
+    specs = [yaml.safe_dump(generate_course(s)) for s in range(10)]
+    assert len(set(specs)) == 10
+    assert generate_course(7, difficulty=0.2) != generate_course(7)
+
+
+def test_fixed_fields_and_course_layout(courses):
+    kinds = set()
+    for seed, (spec, terrain) in courses.items():
+        assert spec["kind"] == "course" and spec["name"] == f"gen:{seed}"
+        assert (spec["friction"], spec["x_min"], spec["y_min"], spec["y_max"]) == (
+            0.7,
+            -0.5,
+            -0.6,
+            0.6,
+        )
+        assert terrain.bounds == pytest.approx((-0.5, 3.4, -0.6, 0.6))
+        assert course_goal_xy(spec) == pytest.approx((3.0, 0.0))
+        segs = spec["segments"]
+        assert segs[0] == {"kind": "flat", "length": pytest.approx(1.1)}
+        assert segs[-1]["kind"] == "flat" and segs[-1]["length"] >= 0.4 - 1e-9
+        assert 2 <= len(segs) - 2 <= 6
+        kinds |= {s["kind"] for s in segs[1:-1]}
+    assert kinds == set(FEATURE_KINDS)
+
+
+def test_heights_finite_start_and_end_flat_edges_bounded(courses):
+    for seed, (_, terrain) in courses.items():
+        x0, x1, y0, y1 = terrain.bounds
+        _, _, grid = terrain.height_grid(x0, x1, y0, y1, 0.01)
+        assert np.isfinite(grid).all(), seed
+        gx, gy = np.meshgrid(np.linspace(x0, x1, 300), np.linspace(y0, y1, 25))
+        assert np.isfinite(terrain.height(gx, gy)).all(), seed
+        # the robot starts on level ground: flat from x_min to 0.6 m
+        xs, ys = np.meshgrid(np.arange(x0, 0.6, 0.005), np.linspace(y0, y1, 13))
+        assert np.abs(terrain.height_sharp(xs, ys)).max() < 1e-5, seed
+        # the goal's landing: flat (one level) over the last 0.4 m
+        xe, ye = np.meshgrid(np.arange(3.0, x1, 0.005), np.linspace(y0, y1, 13))
+        ze = terrain.height_sharp(xe, ye)
+        assert np.ptp(ze) < 1e-5, seed  # a rough patch's tail
+        # no edge higher than 8 cm, along y = 0 and off the centre line
+        x = np.arange(x0, x1, DX_M)
+        for y in (0.0, 0.07, -0.23):
+            z = terrain.height_sharp(x, np.full_like(x, y))
+            assert np.abs(np.diff(z)).max() <= MAX_STEP_M + 1e-5, (seed, y)
+
+
+def test_feature_sizes_respect_the_maxima(courses):
+    for seed, (spec, terrain) in courses.items():
+        for a, b, level, seg in _segments(spec):
+            kind = seg["kind"]
+            x = np.arange(a, b, DX_M)
+            z = terrain.height_sharp(x, np.zeros_like(x))
+            if kind == "rough":
+                assert seg["amplitude"] <= MAX_RELIEF_M
+                xs, ys = np.meshgrid(x[::3], np.linspace(-0.6, 0.6, 121))
+                relief = terrain.height_sharp(xs, ys) - level
+                assert np.abs(relief).max() <= MAX_RELIEF_M + 1e-5, seed
+            elif kind == "step":
+                assert abs(seg["height"]) <= MAX_STEP_M
+                assert z[-1] - level == pytest.approx(seg["height"], abs=1e-5)
+            elif kind == "gap":
+                assert seg["width"] <= MAX_GAP_WIDTH_M and seg["depth"] <= MAX_STEP_M
+                inside = z < level - 0.5 * seg["depth"]
+                assert 0 < inside.sum() * DX_M <= MAX_GAP_WIDTH_M + 2 * DX_M, seed
+            elif kind == "stairs":
+                assert abs(seg["rise"]) <= MAX_STAIR_RISE_M and seg["count"] in (2, 3)
+                assert z[-1] - level == pytest.approx(seg["rise"] * seg["count"], abs=1e-5)
+            elif kind == "stepping_stones":
+                assert seg["depth"] + seg["height_jitter"] <= MAX_STEP_M + 1e-9
+                # along a row of stones, no stretch of pit floor is wider than a stone gap
+                size, gap = seg["size"], seg["gap"]
+                rows = int(np.floor((1.2 - gap) / (size + gap) + 1e-9))
+                y_row = -0.6 + 0.5 * (1.2 - rows * size - (rows - 1) * gap) + 0.5 * size
+                z = terrain.height_sharp(x, np.full_like(x, y_row))
+                floor = np.isclose(z, level - seg["depth"], atol=1e-5)
+                runs = np.diff(np.flatnonzero(np.diff(np.r_[0, floor.astype(int), 0])))[::2]
+                assert len(runs) >= 4  # before, between and after 3-5 columns
+                assert runs.max() * DX_M <= gap + 0.003 <= MAX_GAP_WIDTH_M, seed
+            # the ground keeps within MAX_LEVEL_M plus a feature's depth
+            assert np.abs(z).max() <= 0.2 + MAX_STEP_M + 1e-5
+
+
+def test_difficulty_scales_the_sizes():
+    easy = [generate_course(s, difficulty=0.0) for s in range(10)]
+    for spec in easy:
+        t = Terrain.from_spec(spec)
+        x = np.arange(t.bounds[0], t.bounds[1], DX_M)
+        z = t.height_sharp(x, np.zeros_like(x))
+        assert np.abs(np.diff(z)).max() <= 0.04 + 1e-5
+        for seg in spec["segments"]:
+            if seg["kind"] == "rough":
+                assert seg["amplitude"] == pytest.approx(0.01)
+            if seg["kind"] in ("step", "gap"):
+                assert abs(seg.get("height", seg.get("width"))) == pytest.approx(0.02)
+
+
+def test_other_lengths_and_bad_arguments():
+    spec = generate_course(3, length_m=1.5)
+    t = Terrain.from_spec(spec)
+    assert t.bounds[1] == pytest.approx(1.9) and course_goal_xy(spec) == pytest.approx((1.5, 0))
+    assert spec["name"] == "gen:3:1:1.5"
+    long = generate_course(3, length_m=8.0)
+    assert len(long["segments"]) > 8  # the deck is reshuffled
+    for kwargs, option in (
+        ({"seed": -1}, "--seed"),
+        ({"seed": 1.5}, "--seed"),
+        ({"seed": 1, "difficulty": 1.2}, "--difficulty"),
+        ({"seed": 1, "length_m": 0.5}, "--length"),
+    ):
+        with pytest.raises(InputError, match=option):
+            generate_course(**kwargs)
+
+
+def test_names_resolve_to_yaml_files(tmp_path):
+    assert generated_course_names(3) == ["gen:0", "gen:1", "gen:2"]
+    assert course_name(4, 0.5) == "gen:4:0.5"
+    assert parse_course_name("gen:4") == (4, 1.0, 3.0)
+    assert parse_course_name("gen:4:0.5:2") == (4, 0.5, 2.0)
+    assert parse_course_name("flat") is None
+    with pytest.raises(InputError, match="gen:SEED"):
+        parse_course_name("gen:x")
+    path = write_course("gen:4:0.5", tmp_path)
+    assert path.name == "gen_4_0.5.yaml"
+    terrain = load_terrain(path)
+    assert terrain.name == "gen:4:0.5"
+    assert terrain.spec == Terrain.from_spec(generate_course(4, difficulty=0.5)).spec
+
+
+def test_cli_writes_a_yaml_the_terrain_command_accepts(tmp_path, capsys):
+    out = tmp_path / "course.yaml"
+    assert main(["generate-course", "--seed", "5", "--difficulty", "0.7", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "wrote" in text and "walk to (3.0, 0.0)" in text
+    assert yaml.safe_load(out.read_text()) == generate_course(5, difficulty=0.7)
+    assert main(["terrain", str(out)]) == 0
+    assert "terrain gen:5:0.7: bounds (-0.5, 3.4" in capsys.readouterr().out
+    assert main(["generate-course", "--seed", "5", "--difficulty", "2", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "--difficulty" in err

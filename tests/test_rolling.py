@@ -1,0 +1,97 @@
+"""Rolling sphere feet (planner.rolling): against Pinocchio, the validator and MuJoCo."""
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from planner.interpolate import interpolate_leaf
+from planner.plan import Plan
+from planner.problems import Theta2, Theta4
+from planner.rolling import end_keyframe, rolling_displacement, sliding
+from planner.simulate import SimSettings, run_open_loop
+from planner.terrain import load_terrain
+from planner.validate import check_plan
+
+OUTCOME = {"reached_goal": True, "distance_to_goal": 0.0, "message": "test"}
+
+
+def _body_move(dog, terrain_name, x=0.4, rolling=True, n=12):
+    """Theta4 stance, then Theta2 onto legs 2-4: the leaf between them."""
+    terrain = load_terrain(terrain_name)
+    z = float(terrain.height(x, 0.0)) + 0.15
+    a = Theta4(dog, terrain).solve([x, 0.0, z], [1, 0, 0], [0, 0, 1]).state
+    rc = a.feet_W[[1, 2, 3]].mean(axis=0) + [0.0, 0.0, 0.15]
+    b = Theta2(dog, terrain, support=(1, 2, 3)).solve(a, rc, [1, 0, 0], [0, 0, 1]).state
+    return terrain, a, b, interpolate_leaf(dog, terrain, a, b, n, rolling=rolling)
+
+
+def _pinocchio_feet(dog, states):
+    """(N, 4, 3) foot centres and (N, 4, 3, 3) foot frame rotations by Pinocchio."""
+    model, data = dog.model, dog.model.createData()
+    ids = [model.getFrameId(f) for f in dog.foot_frames]
+    c, R = [], []
+    for s in states:
+        q = dog.q_from(s.base_position_W, s.base_quaternion_xyzw, s.joints_rad)
+        pin.framesForwardKinematics(model, data, q)
+        c.append([data.oMf[i].translation.copy() for i in ids])
+        R.append([data.oMf[i].rotation.copy() for i in ids])
+    return np.array(c), np.array(R)
+
+
+@pytest.mark.parametrize("terrain_name", ["flat", "slope10", "rough2cm"])
+def test_stance_feet_roll_without_sliding(littledog, terrain_name):
+    terrain, a, b, path = _body_move(littledog, terrain_name, x=1.2)
+    c, R = _pinocchio_feet(littledog, path)
+    rho = littledog.foot_radius_m
+    travel = np.linalg.norm(c[-1] - c[0], axis=1)
+    assert travel.max() > 1e-3  # the body move turns the shanks: the feet roll mm
+    for k in range(len(path) - 1):
+        n = terrain.normal(path[k].feet_W)
+        assert sliding(c[k], c[k + 1], R[k], R[k + 1], n, rho).max() < 1e-8
+        # the centre moved by the rolling rho w x n, and rests on the terrain
+        roll = rolling_displacement(R[k], R[k + 1], n, rho)
+        assert np.abs((c[k + 1] - c[k]) - roll).max() < 1e-6
+    assert np.abs(terrain.f_T(path[-1].feet_W)).max() < 1e-6  # the contact fit (contact.py)
+    # the paper's leaf (fixed contact points) slides by the same millimetres
+    fixed = interpolate_leaf(littledog, terrain, a, b, len(path), rolling=False)
+    cf, Rf = _pinocchio_feet(littledog, fixed)
+    slid = sum(
+        sliding(cf[k], cf[k + 1], Rf[k], Rf[k + 1], terrain.normal(fixed[k].feet_W), rho)
+        for k in range(len(fixed) - 1)
+    )
+    assert slid.max() > 0.5 * travel.max()
+
+
+def _plan(dog, terrain, path):
+    """A plan of the body move, its end a keyframe with the rolled feet."""
+    end = end_keyframe(dog, path, (1, 2, 3))
+    samples = path[:-1] + [end]
+    return Plan.build(
+        dog, terrain, terrain.friction, path[0].base_position_W, end.base_position_W,
+        [path[0], end], samples, list(0.25 * np.arange(len(samples))), OUTCOME,
+    )  # fmt: skip
+
+
+def test_check_accepts_rolling_and_rejects_fixed_centres(littledog):
+    terrain, a, b, path = _body_move(littledog, "flat")
+    report = check_plan(_plan(littledog, terrain, path))
+    assert report.ok, "\n".join(map(str, report.violations))
+    assert report.max_slip_m < 1e-8
+    fixed = interpolate_leaf(littledog, terrain, a, b, len(path), rolling=False)
+    kinds = check_plan(_plan(littledog, terrain, fixed)).by_kind()
+    assert kinds.get("stance_slip", 0) > 0
+
+
+def test_mujoco_feet_roll_as_planned(littledog):
+    """Executed open loop, the rolled plan ends where planned; the fixed-centre one does not."""
+    terrain, a, b, path = _body_move(littledog, "flat", n=16)
+    fixed = interpolate_leaf(littledog, terrain, a, b, len(path), rolling=False)
+    settings = SimSettings(time_scale=1.0, settle_s=0.5, hold_s=0.3)
+    err = {}
+    for name, p in (("rolling", path), ("fixed", fixed)):
+        plan = _plan(littledog, terrain, p)
+        m = run_open_loop(plan, settings).metrics
+        assert not m.fell and m.max_sliding_m < 1e-3, m.summary()
+        err[name] = m.final_error_3d_m
+    # the servos track to a degree or so; the rolling model removes the systematic part
+    assert err["rolling"] < 0.6 * err["fixed"], err

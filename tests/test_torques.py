@@ -1,0 +1,89 @@
+"""Joint torques of a stance (planner.torques) against Pinocchio's RNEA and the validator."""
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from planner.plan import Plan
+from planner.robot import load_robot
+from planner.statics import equilibrating_forces
+from planner.torques import TorqueCheck, joint_efforts_nm
+from planner.validate import check_plan
+
+
+@pytest.fixture(scope="module")
+def flat_plan(tmp_path_factory):
+    from planner.walk import plan_walk
+
+    plan, report = plan_walk("littledog", "flat", goal_xy=(0.4, 0.0))
+    assert report.ok
+    return plan
+
+
+def _rnea_torques(robot, q, forces_W, rho=0.0103):
+    """tau = g(q) - sum J^T f by RNEA with the contact forces as external joint forces."""
+    model, data = robot.model, robot.model.createData()
+    pin.framesForwardKinematics(model, data, q)
+    fext = [pin.Force.Zero() for _ in range(model.njoints)]
+    for i, frame in enumerate(robot.foot_frames):
+        f = forces_W[i]
+        if not np.any(f):
+            continue
+        fr = model.frames[model.getFrameId(frame)]
+        M = data.oMi[fr.parentJoint]
+        point = data.oMf[model.getFrameId(frame)].translation - [0.0, 0.0, rho]  # flat ground
+        R = M.rotation
+        fext[fr.parentJoint] += pin.Force(R.T @ f, R.T @ np.cross(point - M.translation, f))
+    nv = model.nv
+    return pin.rnea(model, data, q, np.zeros(nv), np.zeros(nv), fext)
+
+
+def test_torques_match_rnea_and_beat_eq5(flat_plan, littledog):
+    tc = TorqueCheck(littledog)
+    up = np.tile([0.0, 0.0, 1.0], (4, 1))
+    for k in (0, len(flat_plan.samples) // 3, len(flat_plan.samples) // 2):
+        q = flat_plan.samples.q[k]
+        sup = np.flatnonzero(flat_plan.samples.contact[k])
+        res = tc.solve(q, sup, 0.7, up)
+        assert res.feasible and res.status == "Solved"
+        tau = _rnea_torques(littledog, q, res.forces_W)
+        assert np.abs(tau[:6]).max() < 1e-6  # the forces balance the robot
+        v = [littledog.model.joints[littledog.model.getJointId(n)].idx_v
+             for n in littledog.joint_names]  # fmt: skip
+        np.testing.assert_allclose(tau[v], res.torques_nm, atol=1e-6)
+        effort = joint_efforts_nm(littledog)
+        assert res.ratio == pytest.approx(np.max(np.abs(res.torques_nm) / effort), abs=1e-9)
+        # eq. 5's particular forces are admissible, so they need at least the optimum
+        model, data = littledog.model, littledog.model.createData()
+        com = pin.centerOfMass(model, data, q)
+        pin.framesForwardKinematics(model, data, q)
+        feet = np.array([data.oMf[model.getFrameId(f)].translation for f in littledog.foot_frames])
+        eq5 = equilibrating_forces(feet - [0, 0, 0.0103], com, littledog.total_mass_kg, sup)
+        tau5 = _rnea_torques(littledog, q, eq5.forces)[v]
+        assert np.max(np.abs(tau5) / effort) >= res.ratio - 1e-6
+
+
+def test_check_rejects_torques_beyond_the_limit(flat_plan, tmp_path):
+    """The same plan on a LittleDog whose knees give 0.05 N m: joint_torque names a knee."""
+    assert check_plan(flat_plan).max_torque_ratio < 0.8
+    dog = load_robot("littledog")
+    text = dog.urdf_path.read_text().replace('effort="0.6"', 'effort="0.05"')
+    weak = tmp_path / "weak_littledog.urdf"
+    weak.write_text(text)
+    plan = Plan.from_dict(flat_plan.to_dict(), source="edited")
+    plan.robot = {**plan.robot, "urdf": str(weak)}
+    report = check_plan(plan)
+    torque = [v for v in report.violations if v.kind == "joint_torque"]
+    assert torque and set(report.by_kind()) == {"joint_torque"}
+    assert all("knee" in v.message and v.value > 1.0 for v in torque)
+    assert "x its effort limit 0.05 N m" in torque[0].message
+    assert report.max_torque_ratio > 1.0
+
+
+def test_no_balance_is_infinite(littledog):
+    tc = TorqueCheck(littledog)
+    q = pin.neutral(littledog.model)
+    q[2] = 0.2
+    # three feet far to one side of the COM cannot hold it: no admissible forces at all
+    res = tc.solve(q, [0, 1, 2], 0.01, np.tile([1.0, 0.0, 0.0], (4, 1)))
+    assert not res.feasible and res.ratio == np.inf
