@@ -176,6 +176,10 @@ def _source(sim: Simulator, source: StateSource | None, **noise) -> StateSource:
 
 
 # ------------------------------------------------------------------------------ 8.3
+# (stride fraction, Lambda_c shrink) tried in turn for one step from a measured state
+BACKOFF = ((1.0, None), (0.5, 0.5), (0.25, 0.7))
+
+
 def run_feedback(
     plan: Plan,
     settings: SimSettings | None = None,
@@ -193,7 +197,9 @@ def run_feedback(
     :class:`SimulatedMocap` of the simulator with ``noise``: position_noise_m,
     angle_noise_rad, joint_noise_rad, latency_s, seed). Stops at the goal, after
     ``max_cycles`` (default: twice the plan's cycles plus 20), after ``max_fails_in_row``
-    failed step attempts in a row, when the COM has not come 1 cm closer to the goal in
+    failed cycles in a row (a cycle fails when every ``BACKOFF`` attempt of its leg
+    fails: shorter steps, body nearer the support's incentre), when the COM has not come
+    1 cm closer to the goal in
     ``no_progress_cycles`` cycles, or on a fall.
     """
     from planner.local.gait_queue import GaitQueue
@@ -241,7 +247,12 @@ def run_feedback(
         # one cycle of the soft planner (SoftPlanner._run), from the measured state
         cycles += 1
         leg = queue.pop()
-        step = local.step(state, leg, tau, local.stride_m() * step_scale[leg])
+        # back off before giving a leg up: shorter steps over a more centred body (8.5's
+        # ambitions); a failed body move leaves the robot standing where it was measured
+        for frac, shrink in BACKOFF:
+            step = local.step(state, leg, tau, local.stride_m() * step_scale[leg] * frac, shrink)
+            if step.ok:
+                break
         if step.ok:
             step_scale[leg] = 1.0
             fails = 0
@@ -332,8 +343,8 @@ def correct_cycle(
         ref = robot.joints_from_q(plan_q[k])
         joints = np.empty((4, 3))
         for i in range(4):
-            if lift[i] is None or k <= lift[i][0]:
-                target = c_meas[i]
+            if lift[i] is None or k <= lift[i][0]:  # measured start + the planned rolling
+                target = plan_centres[k, i] + (c_meas[i] - plan_centres[0, i])
             elif k < lift[i][1]:
                 a, b = lift[i]
                 u = (k - a) / max(b - a, 1)
