@@ -184,3 +184,28 @@ def test_cli_simulate_bad_input_is_one_line_error(tmp_path, capsys, content, exp
 def test_settings_are_checked():
     with pytest.raises(ValueError, match="time_scale"):
         SimSettings(time_scale=0.0).check()
+
+
+def test_feedback_backs_off_instead_of_giving_up(short_plan, monkeypatch):
+    """Every full-stride step fails from the measured state: half steps carry the walk on."""
+    from planner.local.base import LocalPlanner
+
+    real = LocalPlanner.step
+    tried = []
+
+    def step(self, state, leg, tau, step_m, shrink=None):
+        tried.append(step_m)
+        if step_m > 0.6 * self.stride_m():
+            out = real(self, state, leg, tau, step_m, shrink)
+            out.ok, out.moved, out.end, out.phase = False, None, None, "body_move"
+            out.diagnosis = "refused by the test"
+            return out
+        return real(self, state, leg, tau, step_m, shrink)
+
+    monkeypatch.setattr(LocalPlanner, "step", step)
+    res = run_feedback(short_plan, max_cycles=4)
+    m = res.metrics
+    assert m.replans == 0 and res.executed.stats["feedback"]["steps"] == 4, m.summary()
+    assert not (m.fell or m.tipped), m.summary()
+    full = max(tried)
+    assert any(abs(s - 0.5 * full) < 1e-12 for s in tried)  # the first back-off: half a stride
