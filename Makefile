@@ -19,9 +19,9 @@ test: $(STAMP)
 	$(PY) -m pytest -q
 
 # Theta1-4: IPOPT (exact derivatives) vs SLSQP (finite differences); ~4 min on 2 cores
-# courses: LittleDog x 9 courses x soft/recursive, 2 m walks, 60 s budget; ~15 min on 2 cores
+# courses: LittleDog x 9 courses x soft/recursive, 2 m walks, 240 s budget; ~30 min on 2 cores
 # physics: 9 courses + 20 generated, plan then MuJoCo open/feedback/correct at time scale 1;
-#   ~30-45 min on 2 cores (flat: plan 20 s, open 14 s, feedback 31 s, correct 19 s)
+#   ~90 min on 2 cores (a 2 m plan takes 30-60 s since the rolling feet; see the README)
 bench: $(STAMP)
 	$(VENV)/bin/stratawalk bench theta --jit
 	$(VENV)/bin/stratawalk bench courses

@@ -52,7 +52,7 @@ __all__ = [
 
 _Array = NDArray[np.float64]
 FIXED_POINT_ITERATIONS = 8  # error x (rho / leg length)^k per iteration (0.06^k, LittleDog)
-CONVERGED_M = 1e-9  # centre change [m] that ends the iteration (check's slip limit: 1e-6)
+CONVERGED_M = 1e-7  # centre change [m] that ends the iteration (check's slip limit: 1e-6)
 REST_ITERATIONS = 4  # Newton steps putting a rolled centre back on the offset surface
 
 
