@@ -77,7 +77,7 @@ def test_flat_plan_passes(flat_plan, tmp_path):
     assert report.ok, report.summary() + "\n" + "\n".join(map(str, report.violations))
     assert report.n_samples == 2 * N - 1 and report.n_keyframes == 3
     assert report.min_body_clearance_m > 0.05
-    assert report.min_balance_margin_N > 0.0 and report.max_slip_m < 1e-9
+    assert report.min_balance_margin_N > 0.0 and report.max_slip_m < 1e-7  # rolling, no sliding
     assert not flat_plan.samples.contact[list(SWING), 0].any()
     # through the file and the CLI entry point
     path = flat_plan.save(tmp_path / "plan.json")
@@ -101,7 +101,7 @@ def test_sliding_stance_feet_fail(flat_plan):
     assert kinds_at(report, "stance_slip") == {"sample 5", "sample 8"}
     slips = [v for v in report.violations if v.kind == "stance_slip"]
     assert len(slips) == 8 and {v.leg for v in slips} == {1, 2, 3, 4}
-    assert all(v.value == pytest.approx(0.005, abs=1e-9) for v in slips)
+    assert all(v.value == pytest.approx(0.005, abs=1e-7) for v in slips)
     msgs = [str(v) for v in slips]
     assert (
         "sample 5: stance_slip: leg 2 (FR) slid 5 mm while in contact (centre travel minus "
