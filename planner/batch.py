@@ -35,6 +35,7 @@ scenarios file. A malformed file gives a one-line :class:`~planner.errors.InputE
 from __future__ import annotations
 
 import argparse
+import functools
 import hashlib
 import itertools
 import json
@@ -424,22 +425,36 @@ def _ignore_sigint() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
-def _run_local(jobs, workers, keep_plan) -> Iterable[dict]:
-    ctx = mp.get_context("spawn")  # fresh interpreters: no forked CasADi/IPOPT state
+def run_pool(
+    func: Callable[[dict], dict],
+    jobs: list[dict],
+    workers: int,
+    error_record: Callable[[dict, BaseException], dict],
+) -> Iterable[dict]:
+    """``func(job)`` of every job in a pool of fresh (spawned) processes, as they finish.
+
+    A job whose worker raised yields ``error_record(job, exc)``; Ctrl-C (or the consumer
+    stopping) drops the running jobs and terminates the workers.
+    """
+    ctx = mp.get_context("spawn")  # fresh interpreters: no forked CasADi/IPOPT/MuJoCo state
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_ignore_sigint)
-    futs = {pool.submit(run_job, j, keep_plan): j for j in jobs}
+    futs = {pool.submit(func, j): j for j in jobs}
     try:
         for fut in as_completed(futs):
             try:
                 yield fut.result()
             except Exception as exc:  # e.g. a worker process died
-                yield _error_record(futs[fut], exc)
+                yield error_record(futs[fut], exc)
     except BaseException:  # Ctrl-C or the consumer stopped: drop the running jobs
         pool.shutdown(wait=False, cancel_futures=True)
         for proc in list((getattr(pool, "_processes", None) or {}).values()):
             proc.terminate()
         raise
     pool.shutdown(wait=True)
+
+
+def _run_local(jobs, workers, keep_plan) -> Iterable[dict]:
+    return run_pool(functools.partial(run_job, keep_plan=keep_plan), jobs, workers, _error_record)
 
 
 def _connect(address: str, timeout_s: float = 10.0):

@@ -31,14 +31,12 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
-import multiprocessing as mp
 import os
 import socket
 import sys
 import time
 import traceback
 from collections.abc import Iterable, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any
 
@@ -419,23 +417,9 @@ def write_results(
 # ------------------------------------------------------------------------------ running
 def _run_pool(jobs: list[dict], workers: int) -> Iterable[dict]:
     """Records of the jobs as they finish, from a pool of fresh (spawned) processes."""
-    from planner.batch import _ignore_sigint
+    from planner.batch import run_pool
 
-    ctx = mp.get_context("spawn")  # fresh interpreters: no forked CasADi/IPOPT/MuJoCo state
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_ignore_sigint)
-    futs = {pool.submit(run_physics_job, j): j for j in jobs}
-    try:
-        for fut in as_completed(futs):
-            try:
-                yield fut.result()
-            except Exception as exc:  # e.g. a worker process died
-                yield _failed_record(futs[fut], exc)
-    except BaseException:  # Ctrl-C or the consumer stopped: drop the running jobs
-        pool.shutdown(wait=False, cancel_futures=True)
-        for proc in list((getattr(pool, "_processes", None) or {}).values()):
-            proc.terminate()
-        raise
-    pool.shutdown(wait=True)
+    return run_pool(run_physics_job, jobs, workers, _failed_record)
 
 
 def run_physics_bench(

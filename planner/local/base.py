@@ -372,8 +372,10 @@ class LocalPlanner:
                     f"sample {k} of the path (less than {BODY_CLEARANCE_M * 1000:.0f} mm)"
                 )
         links = leg_links(self.robot)
-        for k, s in enumerate(path):
-            q = self.robot.q_from(s.base_position_W, s.base_quaternion_xyzw, s.joints_rad)
+        qs = [
+            self.robot.q_from(s.base_position_W, s.base_quaternion_xyzw, s.joints_rad) for s in path
+        ]
+        for k, q in enumerate(qs):
             clear = links.clearance_fast(self.terrain, q)
             c = int(np.argmin(clear))
             if clear[c] < LEG_CLEARANCE_M:
@@ -398,8 +400,7 @@ class LocalPlanner:
                     f"balance lost at sample {k} of the path (friction-cone margin "
                     f"{res.margin_N:.2f} N < {need:.2f} N): the COM leaves the support"
                 )
-        for k, s in enumerate(path):
-            q = self.robot.q_from(s.base_position_W, s.base_quaternion_xyzw, s.joints_rad)
+        for k, (s, q) in enumerate(zip(path, qs, strict=True)):
             sup = np.flatnonzero(s.in_contact)
             tq = self.torques.solve(q, sup, self.mu, self.terrain.normal(s.feet_W))
             if not tq.ratio <= TORQUE_FRACTION:
