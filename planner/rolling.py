@@ -144,23 +144,24 @@ def roll_stance_feet(
     n_prev = np.asarray(terrain.normal(contacts_prev_W[s]), float).reshape(-1, 3)
     R_W = np.asarray(base_rotation_W, float)
     p_W = np.asarray(base_position_W, float)
-    results = kin.ik(p_W, R_W, c, reference_rad=reference_rad)  # swing legs once
     ref = np.asarray(reference_rad, float).reshape(4, 3)
+    c_B = (c - p_W) @ R_W
+    results = [kin.ik_leg_near(i, c_B[i], ref[i]) for i in range(4)]  # swing legs once
     for _ in range(FIXED_POINT_ITERATIONS):
         joints = np.array([r.joints_rad for r in results])
         R_now = leg_rotations_W(kin, R_W, joints)
         moved = centres_prev_W[s] + rolling_displacement(rotations_prev_W[s], R_now[s], n_prev, rho)
         change = float(np.max(np.abs(moved - c[s])))
         c[s] = moved
-        for i in s:  # stance legs onto their rolled centres
-            results[i] = kin.ik_leg(i, (c[i] - p_W) @ R_W, ref[i])
+        for i in s:  # stance legs onto their rolled centres (Newton from the last angles)
+            results[i] = kin.ik_leg_near(i, (c[i] - p_W) @ R_W, results[i].joints_rad)
         if change < CONVERGED_M:
             break
     # the tangential rolling leaves a sphere O(curvature x step^2) off a curved terrain:
     # put it back along n (its rotation changes by ~1e-5 rad, its rolling by ~1e-7 m)
     c[s], contacts = _rest(terrain, c[s], n_prev, rho)
     for i in s:
-        results[i] = kin.ik_leg(i, (c[i] - p_W) @ R_W, ref[i])
+        results[i] = kin.ik_leg_near(i, (c[i] - p_W) @ R_W, results[i].joints_rad)
     joints = np.array([r.joints_rad for r in results])
     return c, contacts, results, leg_rotations_W(kin, R_W, joints)
 

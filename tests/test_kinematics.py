@@ -7,7 +7,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from planner.kinematics import kinematics_of
+from planner.kinematics import foot_and_jacobian_np, kinematics_of
 from planner.robot import load_robot
 
 ROBOTS = ["littledog", "solo12", "anymal", "hyq", "go1"]
@@ -89,6 +89,31 @@ def test_foot_jacobian_matches_finite_differences_and_pinocchio(name, rng):
             Jp = pin.getFrameJacobian(model, data, fid, pin.LOCAL_WORLD_ALIGNED)[:3]
             vcols = [model.joints[j].idx_v for j in leg.joint_ids]
             np.testing.assert_allclose(J, Jp[:, vcols], atol=1e-12)
+            p_np, J_np = foot_and_jacobian_np(leg, joints[i])  # the float version for Newton
+            np.testing.assert_allclose(p_np, kin.foot_B(i, joints[i]), atol=1e-14)
+            np.testing.assert_allclose(J_np, Jp[:, vcols], atol=1e-12)
+
+
+def test_newton_ik_near_matches_paden_kahan(littledog, rng):
+    """Small moves (the rolling stance feet): Newton from the last angles = Paden-Kahan."""
+    robot, kin = littledog, kinematics_of(littledog)
+    newton = 0
+    for _ in range(200):
+        i = int(rng.integers(4))
+        start = robot.theta_nor[i] + rng.uniform(-0.3, 0.3, 3)
+        start = np.clip(start, robot.legs[i].lower_rad, robot.legs[i].upper_rad)
+        target = kin.foot_B(i, start) + rng.uniform(-0.004, 0.004, 3)
+        near, exact = kin.ik_leg_near(i, target, start), kin.ik_leg(i, target, start)
+        assert near.reachable == exact.reachable
+        if near.method == "newton":
+            newton += 1
+            assert near.error_m < 1e-10
+            assert any(np.allclose(near.joints_rad, s, atol=1e-8) for s in exact.solutions)
+            assert np.max(np.abs(near.joints_rad - start)) <= 0.2
+    assert newton > 150
+    # far targets fall back to Paden-Kahan
+    far = kin.ik_leg_near(0, kin.foot_B(0, robot.theta_nor[0]) + 0.05, robot.theta_nor[0])
+    assert far.method == "paden-kahan"
 
 
 def test_ik_reproduces_10000_targets(littledog, rng):
