@@ -306,7 +306,8 @@ def parse_course_name(name: str) -> tuple[int, float, float] | None:
 def write_course(spec_or_name: dict | str, path: str | Path) -> Path:
     """Write a generated spec (or the course of a ``gen:...`` name) as YAML; its path.
 
-    ``path`` is a file, or an existing folder (the file is then ``gen_SEED....yaml`` in it).
+    ``path`` is a ``.yaml``/``.yml`` file, or else a folder (made if missing; the file is
+    then ``gen_SEED....yaml`` in it).
     """
     spec = spec_or_name
     if isinstance(spec_or_name, str):
@@ -315,7 +316,7 @@ def write_course(spec_or_name: dict | str, path: str | Path) -> Path:
             raise InputError(f"course '{spec_or_name}': not a generated course name (gen:SEED)")
         spec = generate_course(parsed[0], parsed[2], parsed[1])
     out = Path(path)
-    if out.is_dir():
+    if out.is_dir() or out.suffix.lower() not in (".yaml", ".yml"):
         out = out / (spec["name"].replace(":", "_") + ".yaml")
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(yaml.safe_dump(spec, sort_keys=False, width=90), encoding="utf-8")

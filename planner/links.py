@@ -37,12 +37,22 @@ from numpy.typing import NDArray
 if TYPE_CHECKING:
     from planner.robot import Robot
 
-__all__ = ["Capsule", "LegLinks", "leg_links"]
+__all__ = ["Capsule", "LegLinks", "Witness", "leg_links"]
 
 _Array = NDArray[np.float64]
 FALLBACK_RADIUS_FRACTION = 0.08  # capsule radius / segment length when the URDF has no shape
 LINK_NAMES = ("thigh", "shank")
 _DISC_DIRECTIONS = 8  # samples on the circle of radius r in clearance_fast
+# Margins (beyond the paper) for what execution meets. A leg's links move against the
+# terrain by its joint tracking error turning the leg about where it is held: a stance
+# leg about its foot (pinned on the terrain), a swinging leg about its hip (its links
+# near the foot move with the foot, which has the swing path's clearance). A point at
+# distance d from that anchor moves by ~ d x error, plus a constant for the body's own
+# position error. Chosen poses (Theta) keep KEYFRAME_*, every path sample PATH_*.
+KEYFRAME_MARGIN_M, KEYFRAME_ANGLE_RAD = 0.002, 0.05  # 3 degrees: 5 mm at a 10 cm knee
+PATH_MARGIN_M, PATH_ANGLE_RAD = 0.001, 0.025
+WITNESS_SEARCH_M = 0.02  # capsules farther than this from the terrain get no constraint [m]
+WITNESS_GRID_M = 0.002  # grid of the terrain cloud a witness is picked from [m]
 
 
 @dataclass(frozen=True)
@@ -132,6 +142,13 @@ class LegLinks:
                 a, b, r, src = shape
                 caps.append(Capsule(leg.index, link, urdf_link, jid, a, b, r, src))
         self.capsules = caps
+        # each capsule's ends in body frame at zero joint angles (the root joint at identity)
+        self._fk(pin.neutral(self.model))
+        self.ends_B0 = []
+        for cap in caps:
+            M = self.data.oMi[cap.joint_id]
+            R, t = np.asarray(M.rotation), np.asarray(M.translation)
+            self.ends_B0.append((R @ cap.a_J + t, R @ cap.b_J + t))
         # points along each axis, spacing_m apart (ends included)
         pts, owner = [], []
         for c, cap in enumerate(caps):
@@ -174,6 +191,114 @@ class LegLinks:
             b.append(R @ cap.b_J + t)
         return np.array(a), np.array(b)
 
+    def ends_B_ca(self, c: int, theta):
+        """Symbolic body-frame ends (a, b) of capsule ``c`` for its leg's 3 joint angles.
+
+        The product of exponentials (eq. 2) up to the capsule's joint, as for the foot.
+        """
+        from planner.kinematics import twist_apply_ca
+
+        cap = self.capsules[c]
+        leg = self.robot.legs[cap.leg]
+        upto = list(leg.joint_ids).index(cap.joint_id) + 1
+        a0, b0 = self.ends_B0[c]
+        return twist_apply_ca(leg, theta, a0, upto), twist_apply_ca(leg, theta, b0, upto)
+
+    def witnesses(
+        self,
+        terrain,
+        q: _Array,
+        capsules=None,
+        swing_legs=(),
+        search_m: float = WITNESS_SEARCH_M,
+    ) -> list[Witness | None]:
+        """Per capsule: the sharp-terrain point nearest its axis, or None beyond ``search_m``.
+
+        The sharp surface near the capsule is sampled as a cloud: the tops of a
+        ``WITNESS_GRID_M`` grid of ``Terrain.height_sharp`` around the axis, plus points
+        every ``WITNESS_GRID_M`` on the vertical faces between neighbouring nodes whose
+        heights jump, at the mid-point between them (the corner of a step is within half a
+        grid step of a cloud point). The witness's normal points from it to the axis; the
+        Theta problems hold the capsule on that side of the plane through the witness
+        (:meth:`planner.problems.base.ThetaProblem.constrain_leg_links`) at least
+        ``Witness.need_m`` (``KEYFRAME_*`` margins; ``swing_legs`` are held at the hip).
+        """
+        fast = self.clearance_fast(terrain, q)  # also places the links (forward kinematics)
+        a_W, b_W = self._segments()
+        which = range(len(self.capsules)) if capsules is None else capsules
+        out: list[Witness | None] = [None] * len(self.capsules)
+        for c in which:
+            if fast[c] > search_m:
+                continue
+            cap = self.capsules[c]
+            w = _nearest_on_terrain(terrain, a_W[c], b_W[c], search_m + cap.radius_m)
+            if w is not None:
+                w.clearance_m = w.distance_m - cap.radius_m
+                p = a_W[c] + w.u * (b_W[c] - a_W[c])
+                d = float(self._anchor_distance(p, cap.leg, swing_legs))
+                w.need_m = KEYFRAME_MARGIN_M + KEYFRAME_ANGLE_RAD * d
+            out[c] = w
+        return out
+
+    def _anchor_distance(self, points_W: _Array, legs, swing_legs=()) -> _Array:
+        """Distance of points to where their leg is held (last forward kinematics).
+
+        A stance leg is held at its foot; a swinging leg at its hip, and its links near
+        the foot move with the foot, which keeps the swing path's own clearance: the
+        nearer of hip and foot.
+        """
+        feet, hips = [], []
+        for leg in self.robot.legs:
+            feet.append(self.data.oMf[self.model.getFrameId(leg.foot_frame)].translation)
+            hips.append(self.data.oMi[leg.joint_ids[0]].translation)
+        feet, hips = np.array(feet), np.array(hips)
+        legs = np.asarray(legs, int)
+        d = np.linalg.norm(np.asarray(points_W) - feet[legs], axis=-1)
+        swing = np.isin(legs, list(swing_legs))
+        if np.any(swing):
+            d_hip = np.linalg.norm(np.asarray(points_W) - hips[legs], axis=-1)
+            d = np.where(swing, np.minimum(d, d_hip), d)
+        return d
+
+    def _segments(self) -> tuple[_Array, _Array]:
+        a, b = [], []
+        for cap in self.capsules:
+            M = self.data.oMi[cap.joint_id]
+            R, t = np.asarray(M.rotation), np.asarray(M.translation)
+            a.append(R @ cap.a_J + t)
+            b.append(R @ cap.b_J + t)
+        return np.array(a), np.array(b)
+
+    def path_margin(self, terrain, q: _Array, swing_legs=()) -> _Array:
+        """(C,) least of (clearance bound - path margin) over each capsule's points [m].
+
+        Negative: some point of the capsule is nearer the terrain than the path margin
+        (``PATH_MARGIN_M`` + ``PATH_ANGLE_RAD`` x its distance to the leg's anchor): by
+        the conservative bound of :meth:`clearance_fast`, and where that fails, by the
+        Euclidean distance to the nearest terrain point (:meth:`witnesses`' cloud, ~1 mm).
+        """
+        gap = self._gaps(terrain, q)
+        legs = np.array([cap.leg for cap in self.capsules])[self.owner]
+        need = PATH_MARGIN_M + PATH_ANGLE_RAD * self._anchor_distance(
+            self._points_W, legs, swing_legs
+        )
+        out = np.full(len(self.capsules), np.inf)
+        np.minimum.at(out, self.owner, gap - need)
+        # the bound is poor beside a riser (a vertical gap where the true one is
+        # horizontal): where it fails, the witness's Euclidean distance decides
+        a_W, b_W = self._segments()
+        for c in np.flatnonzero(out < 0.0):
+            cap = self.capsules[c]
+            w = _nearest_on_terrain(terrain, a_W[c], b_W[c], cap.radius_m + WITNESS_SEARCH_M)
+            if w is None:
+                out[c] = np.inf
+                continue
+            p = a_W[c] + w.u * (b_W[c] - a_W[c])
+            d = float(self._anchor_distance(p, cap.leg, swing_legs))
+            need_w = PATH_MARGIN_M + PATH_ANGLE_RAD * d
+            out[c] = w.distance_m - cap.radius_m - need_w
+        return out
+
     def clearance_fast(self, terrain, q: _Array) -> _Array:
         """(C,) lower bounds of each capsule's clearance above the sharp terrain [m].
 
@@ -184,16 +309,80 @@ class LegLinks:
         one is horizontal, which can only be smaller. It misses a corner cutting less
         than ``r (1 - cos(pi / 8))`` (0.08 r) into the disc between two samples.
         """
-        pts = self.axis_points_W(q)
+        gap = self._gaps(terrain, q)
+        out = np.full(len(self.capsules), np.inf)
+        np.minimum.at(out, self.owner, gap)
+        return out
+
+    def _gaps(self, terrain, q: _Array) -> _Array:
+        """(P,) clearance bound of every axis point (see :meth:`clearance_fast`)."""
+        pts = self._points_W = self.axis_points_W(q)
         ang = 2.0 * np.pi * np.arange(_DISC_DIRECTIONS) / _DISC_DIRECTIONS
         ring = 1.05 * self.radius[:, None]
         xs = np.concatenate([pts[:, :1], pts[:, :1] + ring * np.cos(ang)], axis=1)
         ys = np.concatenate([pts[:, 1:2], pts[:, 1:2] + ring * np.sin(ang)], axis=1)
         h = np.asarray(terrain.height_sharp(xs, ys), dtype=float).reshape(xs.shape).max(axis=1)
-        gap = pts[:, 2] - self.radius - h
-        out = np.full(len(self.capsules), np.inf)
-        np.minimum.at(out, self.owner, gap)
-        return out
+        return pts[:, 2] - self.radius - h
+
+
+@dataclass
+class Witness:
+    """The terrain point nearest a capsule axis: ``u`` along the axis (0 at a, 1 at b)."""
+
+    u: float
+    point_W: _Array  # on the sharp terrain [m]
+    normal_W: _Array  # unit, from the terrain point toward the axis
+    distance_m: float  # axis to terrain; under it: minus the depth, normal e_z
+    clearance_m: float = 0.0  # distance minus the capsule radius
+    need_m: float = 0.0  # the clearance asked of this point (margin model, module top)
+
+
+def _nearest_on_terrain(terrain, a: _Array, b: _Array, reach_m: float) -> Witness | None:
+    """Nearest cloud point of the sharp terrain to segment a-b within ``reach_m``."""
+    g = WITNESS_GRID_M
+    lo = np.minimum(a, b)[:2] - reach_m
+    hi = np.maximum(a, b)[:2] + reach_m
+    xs = np.arange(lo[0], hi[0] + g, g)
+    ys = np.arange(lo[1], hi[1] + g, g)
+    X, Y = np.meshgrid(xs, ys)  # [iy, ix]
+    H = np.asarray(terrain.height_sharp(X.ravel(), Y.ravel()), float).reshape(X.shape)
+    clouds = [np.stack([X, Y, H], axis=-1).reshape(-1, 3)]
+    for axis in (0, 1):  # faces between neighbours along x, then y
+        h0 = H[:, :-1] if axis == 1 else H[:-1, :]
+        h1 = H[:, 1:] if axis == 1 else H[1:, :]
+        x0 = X[:, :-1] if axis == 1 else X[:-1, :]
+        x1 = X[:, 1:] if axis == 1 else X[1:, :]
+        y0 = Y[:, :-1] if axis == 1 else Y[:-1, :]
+        y1 = Y[:, 1:] if axis == 1 else Y[1:, :]
+        jump = np.abs(h1 - h0) > 2 * g
+        if not np.any(jump):
+            continue
+        lo_h, hi_h = np.minimum(h0, h1)[jump], np.maximum(h0, h1)[jump]
+        mx, my = 0.5 * (x0 + x1)[jump], 0.5 * (y0 + y1)[jump]
+        n = int(np.ceil(float(np.max(hi_h - lo_h)) / g)) + 1
+        t = np.linspace(0.0, 1.0, n)
+        zs = lo_h[:, None] + (hi_h - lo_h)[:, None] * t[None, :]
+        face = np.stack([np.repeat(mx, n), np.repeat(my, n), zs.ravel()], axis=1)
+        clouds.append(face)
+    # an axis that enters the terrain: the deepest of its points, pushed straight up
+    s = np.linspace(0.0, 1.0, max(2, int(np.ceil(np.linalg.norm(b - a) / g)) + 1))
+    axis = a + s[:, None] * (b - a)
+    gap = axis[:, 2] - np.asarray(terrain.height_sharp(axis[:, 0], axis[:, 1]), float)
+    if float(gap.min()) < 0.0:
+        k = int(np.argmin(gap))
+        top = np.array([axis[k, 0], axis[k, 1], axis[k, 2] - gap[k]])
+        return Witness(float(s[k]), top, np.array([0.0, 0.0, 1.0]), float(gap[k]))
+    cloud = np.concatenate(clouds)
+    ab = b - a
+    L2 = max(float(ab @ ab), 1e-18)
+    u = np.clip(((cloud - a) @ ab) / L2, 0.0, 1.0)
+    foot = a + u[:, None] * ab
+    d = np.linalg.norm(foot - cloud, axis=1)
+    k = int(np.argmin(d))
+    if d[k] > reach_m:
+        return None
+    p, w = foot[k], cloud[k]
+    return Witness(float(u[k]), w, (p - w) / max(float(d[k]), 1e-12), float(d[k]))
 
 
 _CACHE: dict[int, LegLinks] = {}

@@ -114,11 +114,12 @@ def test_slsqp_and_ipopt_get_the_same_problem(littledog, monkeypatch, theta):
     rec_sl = bench.solve_slsqp(problem, inst.p, inst.x0, inst.context)
     call = spy.calls[-1]
     np.testing.assert_array_equal(call["x0"], seen["x0"])  # same start point
-    # same parameters: the caller's, with the clearance points both picked at x0
+    # same parameters: the caller's, with the clearance points and link witnesses both
+    # picked at x0
     np.testing.assert_array_equal(call["p"], seen["p"])
-    picked = problem._p_slices.get("clearance_points_B", slice(0, 0))
     keep = np.ones(len(inst.p), bool)
-    keep[picked] = False
+    for generated in ("clearance_points_B", "link_witnesses"):  # picked by the rounds
+        keep[problem._p_slices.get(generated, slice(0, 0))] = False
     np.testing.assert_array_equal(call["p"][keep], inst.p[keep])
     np.testing.assert_array_equal(call["lbx"], problem.lbx)
     # the objective SLSQP evaluates at x0 is IPOPT's objective at x0 with the same p

@@ -146,7 +146,9 @@ def test_job_list(tmp_path):
     # the id does not depend on where the course file was written
     again = physics_jobs(courses=(), generated=3, out_dir=tmp_path / "other")
     assert job_id(again[-1]) == job_id(gen)
-    custom = physics_jobs(courses=("flat", "gen:5:0.5"), generated=0, modes=("open",))
+    custom = physics_jobs(
+        courses=("flat", "gen:5:0.5"), generated=0, modes=("open",), out_dir=tmp_path
+    )
     assert [j["course"] for j in custom] == ["flat", "gen:5:0.5"]
 
 

@@ -170,6 +170,11 @@ def test_names_resolve_to_yaml_files(tmp_path):
     terrain = load_terrain(path)
     assert terrain.name == "gen:4:0.5"
     assert terrain.spec == Terrain.from_spec(generate_course(4, difficulty=0.5)).spec
+    # a folder that does not exist yet is made, one file per course (not one file for all)
+    folder = tmp_path / "new" / "courses"
+    paths = {write_course(f"gen:{seed}", folder) for seed in range(3)}
+    assert sorted(p.name for p in paths) == ["gen_0.yaml", "gen_1.yaml", "gen_2.yaml"]
+    assert len({load_terrain(p).spec["name"] for p in paths}) == 3
 
 
 def test_cli_writes_a_yaml_the_terrain_command_accepts(tmp_path, capsys):

@@ -201,3 +201,54 @@ def test_clearance_constraint_generation_over_a_barrier(littledog):
     assert len(rounds) >= 2
     assert again.feasible, again.diagnosis
     np.testing.assert_allclose(again.state.base_position_W, sol.state.base_position_W, atol=1e-5)
+
+
+def _exact_link_clearance(dog, terrain, state):
+    """Per capsule: least exact distance of its axis to the sharp terrain minus its radius."""
+    from planner.links import leg_links
+    from planner.validate import sharp_surface_distance
+
+    links = leg_links(dog)
+    q = dog.q_from(state.base_position_W, state.base_quaternion_xyzw, state.joints_rad)
+    d = sharp_surface_distance(terrain, links.axis_points_W(q), 0.05, step_m=5e-4) - links.radius
+    return np.array([d[links.owner == c].min() for c in range(len(links.capsules))])
+
+
+@pytest.mark.parametrize("name,x", STANCES)
+def test_theta2_keeps_leg_links_off_the_terrain(dog, name, x):
+    """Every thigh and shank keeps its keyframe margin, measured exactly (to the ~1 mm
+    of the witness cloud); the NLP's rows are the witness distances at the start."""
+    from planner.links import leg_links
+    from planner.problems.base import WITNESS_SLACK_M
+
+    terrain, placed, u_f, u_n = _placed(dog, name, x)
+    start = placed.state
+    problem = Theta2(dog, terrain, support=(1, 2, 3))
+    rc = start.feet_W[[1, 2, 3]].mean(axis=0) + 0.15 * u_n
+    # rows at the start with the start's witnesses: n.(axis point - w) - need
+    _, wit = problem.check.leg_clearance(start, range(4))
+    assert any(w is not None for w in wit)  # the shanks' feet ends are near the ground
+    p = problem.params(start, rc, u_f, u_n)
+    p[problem._p_slices["link_witnesses"]] = problem._link_witness_params(wit)
+    x0 = problem.initial_guess(start, p)
+    x0[problem._x_slices["p"]] = start.base_position_W  # the start pose itself
+    x0[problem._x_slices["theta"]] = start.joints_rad.ravel()
+    from planner.lie import coords_from_pose
+
+    x0[problem._x_slices["phi"]] = coords_from_pose(start.pose)[3:]
+    g = np.array(problem._g_fun(x0, p)).ravel()[problem._g_slices["leg_clearance"]]
+    links = leg_links(dog)
+    for row, c in zip(g, problem._link_caps, strict=True):
+        w = wit[c]
+        if w is None:
+            assert row == pytest.approx(1.0)  # inactive
+        else:
+            want = w.clearance_m - w.need_m - WITNESS_SLACK_M
+            assert row == pytest.approx(want, abs=1e-9), links.describe(c)
+    sol = problem.solve(start, rc, u_f, u_n)
+    assert sol.feasible, sol.diagnosis
+    exact = _exact_link_clearance(dog, terrain, sol.state)
+    _, wit = problem.check.leg_clearance(sol.state, range(4))
+    for c, w in enumerate(wit):
+        need = 0.0 if w is None else w.need_m
+        assert exact[c] >= need - 1.2e-3, (links.describe(c), exact[c], need)

@@ -32,7 +32,7 @@ from planner.interpolate import default_clearance_m, interpolate_leaf, interpola
 from planner.kinematics import kinematics_of
 from planner.links import leg_links
 from planner.local.gait_queue import CRAWL
-from planner.problems import Theta2, Theta3, Theta4, ThetaOptions
+from planner.problems import Theta1, Theta2, Theta3, Theta4, ThetaOptions
 from planner.problems.base import ConstraintCheck
 from planner.robot import LEG_NAMES
 from planner.rolling import end_keyframe
@@ -42,7 +42,7 @@ from planner.trajectory import Trajectory
 
 BODY_CLEARANCE_M = 0.005  # least height of the body's bottom above the sharp terrain [m]
 TARGET_RADIUS_M = 0.01  # a placed foot lands within this of its (edge-free) target [m]
-LEG_CLEARANCE_M = 0.004  # least clearance of a thigh or shank capsule (planner.links) [m]
+WIDE_TARGET_RADIUS_M = 0.04  # ... or this, when the leg's links forbid the near footholds
 TORQUE_FRACTION = 0.8  # joint torque / URDF effort the servos may need to hold a sample
 
 
@@ -177,7 +177,14 @@ class LocalPlanner:
         self.kin = kinematics_of(robot)
         self._theta2: dict[tuple[int, ...], Theta2] = {}
         self._theta3: dict[int, Theta3] = {}
-        self.stats = {"theta2": [0, 0], "theta3": [0, 0], "theta4": [0, 0], "swing_ik": [0, 0]}
+        self._theta1: dict[tuple[int, ...], Theta1] = {}
+        self.stats = {
+            "theta1": [0, 0],
+            "theta2": [0, 0],
+            "theta3": [0, 0],
+            "theta4": [0, 0],
+            "swing_ik": [0, 0],
+        }
         self.failures: list[dict] = []  # every failed step attempt, for the plan's stats
         self.extra_stats: dict = {}
         self.check = ConstraintCheck(robot, terrain, self.settings.theta)
@@ -285,11 +292,74 @@ class LocalPlanner:
         )
         why = self.path_problem(path)
         if why:
+            # the stance feet roll along the path (mm; more when the body pitches), so the
+            # path ends on other feet than Theta2 placed its pose on: solve it again on the
+            # rolled feet, and interpolate to that pose
+            rolled = state.copy()
+            rolled.feet_W = path[-1].feet_W.copy()
+            again = self.theta2(support).solve(rolled, rc, u_f, u_n, swing_target_W)
+            self._count("theta2", again.feasible)
+            if again.feasible:
+                again.state.support = support
+                again.state.feet_W = state.feet_W.copy()
+                path2 = interpolate_leaf(
+                    self.robot, self.terrain, state, again.state, self.settings.body_samples
+                )
+                why2 = self.path_problem(path2)
+                if not why2 or ("path margin" in why2) == ("path margin" in why):
+                    sol, path, why = again, path2, why2
+        if "path margin" in why:  # a leg link sweeps past an edge between two clear poses
+            via_path = self._via_path(state, sol.state, path, u_f, u_n)
+            if via_path is not None:
+                why2 = self.path_problem(via_path)
+                if not why2:
+                    path, why = via_path, ""
+        if why:
             sol.feasible = False
             sol.diagnosis = f"body move onto three legs: {why}"
             return sol, []
         sol.state = self.path_end(path, support)
         return sol, path
+
+    def _via_path(self, start: State, end: State, path: list[State], u_f, u_n):
+        """A body move through a via pose where ``path`` brings a leg link nearest the terrain.
+
+        Beyond the paper: the leaf's straight line in exponential coordinates (eq. 6b) can
+        sweep a thigh or shank past a step edge although both ends clear it. Theta1 (the
+        COM held where the failing sample has it, leg links clear by the keyframe margin)
+        picks a via pose on the same leaf there; the move is then start -> via -> end.
+        Returns the new path, or None when Theta1 finds no via pose.
+        """
+        links = leg_links(self.robot)
+        worst = [
+            float(
+                links.path_margin(
+                    self.terrain,
+                    self.robot.q_from(s.base_position_W, s.base_quaternion_xyzw, s.joints_rad),
+                ).min()
+            )
+            for s in path
+        ]
+        k = int(np.argmin(worst))
+        probe = path[k].copy()
+        probe.feet_W = start.feet_W.copy()
+        support = end.support
+        if support not in self._theta1:
+            self._theta1[support] = Theta1(
+                self.robot, self.terrain, support=support, options=self.settings.theta, mu=self.mu
+            )
+        sol = self._theta1[support].solve(probe, self.check.com_W(path[k]), u_f, u_n)
+        self._count("theta1", sol.feasible)
+        if not sol.feasible:
+            return None
+        via = sol.state
+        via.support = support
+        n = self.settings.body_samples
+        first = interpolate_leaf(self.robot, self.terrain, start, via, n)
+        end2 = end.copy()
+        end2.feet_W = first[-1].feet_W.copy()
+        second = interpolate_leaf(self.robot, self.terrain, first[-1], end2, n)
+        return first + second[1:]
 
     def swing(self, state: State, leg: int, tau: Trajectory, step_m: float, target_W=None):
         """Theta3 for ``leg`` toward ``target_W`` (default Lambda_t); returns (solution, samples).
@@ -300,8 +370,14 @@ class LocalPlanner:
             target_W = lambda_t(self.robot, self.terrain, state, leg, tau, step_m=step_m)
         lifted = state.copy()
         lifted.stratum = leg + 1
-        sol = self.theta3(leg).solve(lifted, target_W, target_radius_m=TARGET_RADIUS_M)
-        self._count("theta3", sol.feasible)
+        for radius in (TARGET_RADIUS_M, WIDE_TARGET_RADIUS_M):
+            sol = self.theta3(leg).solve(lifted, target_W, target_radius_m=radius)
+            self._count("theta3", sol.feasible)
+            # near an edge the leg's links may forbid every foothold close to the target:
+            # let the foot land farther (the edge test below still applies)
+            near = ("leg_clearance", "target_radius")
+            if sol.feasible or not any(sol.violations.get(k, 0.0) > 1e-6 for k in near):
+                break
         if not sol.feasible:
             return sol, []
         touch = sol.state
@@ -346,7 +422,8 @@ class LocalPlanner:
         Keyframes are feasible by construction, the samples between them are not: a leg
         can run out of reach mid-way, the body box can dip onto the sharp terrain (its
         bottom face is checked on a 5 mm grid), a thigh or shank can pass through an edge
-        (:meth:`planner.links.LegLinks.clearance_fast`, ``LEG_CLEARANCE_M``), and the COM
+        (:meth:`planner.links.LegLinks.path_margin`: 1 mm + 1.5 degrees x the distance to
+        where the leg is held), and the COM
         moves (the body along eq. 6b, the swing leg's own mass) so that it can leave the
         support, or needs joint torques near the servos' limits (``TORQUE_FRACTION`` of
         the URDF effort, :mod:`planner.torques`: a saturated servo cannot track). Every
@@ -375,13 +452,14 @@ class LocalPlanner:
         qs = [
             self.robot.q_from(s.base_position_W, s.base_quaternion_xyzw, s.joints_rad) for s in path
         ]
-        for k, q in enumerate(qs):
-            clear = links.clearance_fast(self.terrain, q)
-            c = int(np.argmin(clear))
-            if clear[c] < LEG_CLEARANCE_M:
+        for k, (s, q) in enumerate(zip(path, qs, strict=True)):
+            swing = [i for i in range(4) if not s.in_contact[i]]
+            short = links.path_margin(self.terrain, q, swing)
+            c = int(np.argmin(short))
+            if short[c] < 0.0:
                 return (
-                    f"the {links.describe(c)} passes {clear[c] * 1000:.1f} mm above the terrain "
-                    f"at sample {k} of the path (less than {LEG_CLEARANCE_M * 1000:.0f} mm)"
+                    f"the {links.describe(c)} comes {-short[c] * 1000:.1f} mm nearer the terrain "
+                    f"than its path margin at sample {k} of the path"
                 )
         for k, s in enumerate(path[1:-1], start=1):
             sup = np.flatnonzero(s.in_contact)

@@ -40,6 +40,9 @@ from planner.state import State
 FEASIBILITY_TOL = 1e-6  # [m, rad, N]: an independent violation above this is infeasible
 CLEARANCE_ACTIVE_POINTS = 8  # points of P held besides its bottom corners (2 per quarter)
 CLEARANCE_ROUNDS = 4  # solves at most, each one re-picking the lowest points
+# the NLP holds a capsule this much farther than the check asks: the witness of the next
+# round is another cloud point (2 mm grid), up to ~1 mm nearer than the plane it replaces
+WITNESS_SLACK_M = 0.001
 
 
 @dataclass
@@ -161,6 +164,23 @@ class ConstraintCheck:
         verts_W = pts_B @ state.base_rotation_W.T + state.base_position_W
         f = self.terrain.f_T(verts_W)
         return float(max(np.max(self.options.clearance_m - f), 0.0))
+
+    def leg_clearance(self, state: State, legs) -> tuple[float, list]:
+        """Margin minus clearance of the given legs' capsules [m], if positive.
+
+        The margin is :mod:`planner.links`' keyframe margin (2 mm + 3 degrees x distance
+        to the foot). Also returns every capsule's :class:`planner.links.Witness` (None
+        when farther than ``planner.links.WITNESS_SEARCH_M`` or not of these legs).
+        """
+        from planner.links import leg_links
+
+        links = leg_links(self.robot)
+        legs = set(legs)
+        caps = [c for c, cap in enumerate(links.capsules) if cap.leg in legs]
+        q = self.robot.q_from(state.base_position_W, state.base_quaternion_xyzw, state.joints_rad)
+        wit = links.witnesses(self.terrain, q, caps)
+        gaps = [w.need_m - w.clearance_m for w in wit if w is not None]
+        return float(max(max(gaps, default=0.0), 0.0)), wit
 
     def orientation(self, state: State) -> float:
         """|theta omega| - pi [rad], if positive (constraint a)."""
@@ -298,6 +318,51 @@ class ThetaProblem:
         self.constrain("sigma1", s1 - ca.dot(u_f, R[:, 0]))
         self.constrain("sigma2", s2 - ca.dot(u_n, R[:, 2]))
 
+    def constrain_leg_links(self, pos, R, thetas: dict) -> None:
+        """Thigh and shank capsules of the legs in ``thetas`` (leg -> its 3 joint SX) clear.
+
+        Beyond the paper (planner.links): for each capsule a half-space constraint
+        n . (a + u (b - a) - w) >= radius + margin + WITNESS_SLACK_M, with w the sharp-terrain
+        point nearest the capsule's axis, n the unit vector from w to the axis and u where
+        along the axis (parameters, :meth:`solve_rounds` picks them at each round from the
+        pose reached: constraint generation, as for the body's clearance points). At the
+        witness this is the exact distance; elsewhere the plane is a conservative local
+        model of the terrain. A capsule farther than ``planner.links.WITNESS_SEARCH_M``
+        gets an inactive row (n = 0). The margin grows with the witness's distance from
+        the leg's foot (:data:`planner.links.KEYFRAME_ANGLE_RAD`): execution errors turn
+        a stance leg about its foot.
+        """
+        from planner.links import leg_links
+
+        links = leg_links(self.robot)
+        self._link_legs = sorted(thetas)
+        caps = [c for c, cap in enumerate(links.capsules) if cap.leg in thetas]
+        self._link_caps = caps
+        w = ca.reshape(self.par("link_witnesses", 8 * len(caps)), 8, -1)
+        rows = []
+        for k, c in enumerate(caps):
+            a_B, b_B = links.ends_B_ca(c, thetas[links.capsules[c].leg])
+            a = ca.mtimes(R, a_B) + pos
+            b = ca.mtimes(R, b_B) + pos
+            point = a + w[0, k] * (b - a)
+            rows.append(ca.dot(w[4:7, k], point - w[1:4, k]) - w[7, k])
+        self.constrain("leg_clearance", ca.vertcat(*rows), 0.0, np.inf)
+
+    def _link_witness_params(self, witnesses: list) -> np.ndarray:
+        """The ``link_witnesses`` block for :meth:`constrain_leg_links` (8 per capsule)."""
+        from planner.links import leg_links
+
+        links = leg_links(self.robot)
+        out = []
+        for c in self._link_caps:
+            w = witnesses[c]
+            if w is None:
+                out.append([0.0, 0, 0, 0, 0, 0, 0, -1.0])  # 0 - (-1) >= 0: inactive
+            else:
+                need = links.capsules[c].radius_m + w.need_m + WITNESS_SLACK_M
+                out.append([w.u, *w.point_W, *w.normal_W, need])
+        return np.asarray(out, float).ravel()
+
     def rotation(self, phi):
         """R(phi) from the rotation-vector half of eps(g) (section 4.7)."""
         return rotation_from_vector_ca(phi)
@@ -370,11 +435,11 @@ class ThetaProblem:
     def pack_params(self, values: dict[str, np.ndarray]) -> np.ndarray:
         """Parameter vector from a dict of named blocks (every block must be given).
 
-        The clearance points are set by :meth:`solve_rounds` at each solve.
+        The clearance points and link witnesses are set by :meth:`solve_rounds`.
         """
         out = np.zeros(self._p_sym.numel())
         for name, sl in self._p_slices.items():
-            if name == "clearance_points_B" and name not in values:
+            if name in ("clearance_points_B", "link_witnesses") and name not in values:
                 continue
             if name not in values:
                 raise KeyError(f"{self.name}: parameter '{name}' missing")
@@ -423,8 +488,9 @@ class ThetaProblem:
         """Run ``inner(p, x0) -> (x, status, iterations)`` with constraint generation.
 
         Before each round the NLP's clearance parameters are set to the points of P
-        lowest over the terrain at the current pose; a round whose solution the
-        independent check finds too close to the terrain is solved again from there (at
+        lowest over the terrain at the current pose, and its link witnesses to the
+        terrain points nearest each leg capsule; a round whose solution the independent
+        check finds too close to the terrain (body or legs) is solved again from there (at
         most ``CLEARANCE_ROUNDS``). Returns (x, p, status, iterations, state, violations,
         solve_time_s) with p as used by the last round, the iterations summed and the
         time of the rounds without the independent checks (reported by every solve anyway).
@@ -432,19 +498,31 @@ class ThetaProblem:
         x = np.clip(np.asarray(x0, dtype=float), self.lbx, self.ubx)
         p = np.array(p, dtype=float)
         picked = self._p_slices.get("clearance_points_B")
+        links = self._p_slices.get("link_witnesses")
+        generated = picked is not None or links is not None
         iterations, solve_time = 0, 0.0
-        state = self._state_from_x(x, p) if picked is not None else None
+        state = self._state_from_x(x, p) if generated else None
+        witnesses = None
         for _ in range(CLEARANCE_ROUNDS):
             t0 = time.perf_counter()
             if picked is not None:
                 p[picked] = self._lowest_points_B(state).ravel()
+            if links is not None:
+                if witnesses is None:
+                    witnesses = self.check.leg_clearance(state, self._link_legs)[1]
+                p[links] = self._link_witness_params(witnesses)
             x, status, n = inner(p, x)
             solve_time += time.perf_counter() - t0
             iterations += n
             x = np.clip(x, self.lbx, self.ubx) if np.all(np.isfinite(x)) else x
             state = self._state_from_x(x, p)
             violations = self._violations(state, x, p)
-            if picked is None or not violations.get("clearance", 0.0) > FEASIBILITY_TOL:
+            if links is not None:
+                violations["leg_clearance"], witnesses = self.check.leg_clearance(
+                    state, self._link_legs
+                )
+            again = ("clearance", "leg_clearance") if generated else ()
+            if not any(violations.get(k, 0.0) > FEASIBILITY_TOL for k in again):
                 break
         return x, p, status, iterations, state, violations, solve_time
 
@@ -490,6 +568,7 @@ class ThetaProblem:
             "contact": ": a stance foot is out of reach of this body pose",
             "com": ": the COM target cannot be reached with these footholds",
             "clearance": ": the body box P would touch the terrain; lower clearance_m?",
+            "leg_clearance": ": a thigh or shank would come too near the terrain (an edge)",
             "forces": ": no eq. 5 forces inside the friction cones; the COM is outside the"
             " support or the slope too steep",
             "foot_on_terrain": ": the swing foot cannot reach the terrain",

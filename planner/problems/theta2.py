@@ -76,6 +76,7 @@ class Theta2(ThetaProblem):
         R = self.rotation(phi)
         self.constrain("contact", ca.vec(self.kin.feet_W_ca(pos, R, th)) - centres)
         self.constrain_body_pose(pos, R, phi, s1, s2, u_f, u_n)
+        self.constrain_leg_links(pos, R, {i: th[3 * i : 3 * i + 3] for i in range(4)})
         com = com_W_ca(self, pos, R, th)
         if self.fix_com:
             self.constrain("com", com - rc)

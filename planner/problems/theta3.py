@@ -56,6 +56,7 @@ class Theta3(ThetaProblem):
             hfun, contact_xy, r.foot_radius_m
         )
         self.constrain("foot_on_terrain", centre - centre_on)
+        self.constrain_leg_links(pos, R, {i: th})
         radius = self.par("target_radius_m", 1)
         miss = contact - target
         self.constrain("target_radius", ca.dot(miss, miss) - radius**2, -np.inf, 0.0)
