@@ -147,21 +147,21 @@ def roll_stance_feet(
     ref = np.asarray(reference_rad, float).reshape(4, 3)
     c_B = (c - p_W) @ R_W
     results = [kin.ik_leg_near(i, c_B[i], ref[i]) for i in range(4)]  # swing legs once
+    contacts = None
     for _ in range(FIXED_POINT_ITERATIONS):
         joints = np.array([r.joints_rad for r in results])
         R_now = leg_rotations_W(kin, R_W, joints)
         moved = centres_prev_W[s] + rolling_displacement(rotations_prev_W[s], R_now[s], n_prev, rho)
+        # the tangential rolling leaves a sphere O(curvature x step^2) off a curved
+        # terrain: put it back along n (no tangential part, so no sliding), inside the
+        # fixed point so that the legs' rotations, hence the rolling, follow
+        moved, contacts = _rest(terrain, moved, n_prev, rho)
         change = float(np.max(np.abs(moved - c[s])))
         c[s] = moved
         for i in s:  # stance legs onto their rolled centres (Newton from the last angles)
             results[i] = kin.ik_leg_near(i, (c[i] - p_W) @ R_W, results[i].joints_rad)
         if change < CONVERGED_M:
             break
-    # the tangential rolling leaves a sphere O(curvature x step^2) off a curved terrain:
-    # put it back along n (its rotation changes by ~1e-5 rad, its rolling by ~1e-7 m)
-    c[s], contacts = _rest(terrain, c[s], n_prev, rho)
-    for i in s:
-        results[i] = kin.ik_leg_near(i, (c[i] - p_W) @ R_W, results[i].joints_rad)
     joints = np.array([r.joints_rad for r in results])
     return c, contacts, results, leg_rotations_W(kin, R_W, joints)
 

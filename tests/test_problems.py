@@ -229,7 +229,7 @@ def test_theta2_keeps_leg_links_off_the_terrain(dog, name, x):
     _, wit = problem.check.leg_clearance(start, range(4))
     assert any(w is not None for w in wit)  # the shanks' feet ends are near the ground
     p = problem.params(start, rc, u_f, u_n)
-    p[problem._p_slices["link_witnesses"]] = problem._link_witness_params(wit)
+    p[problem._p_slices["leg_clearance_witnesses"]] = problem._link_witness_params(wit)
     x0 = problem.initial_guess(start, p)
     x0[problem._x_slices["p"]] = start.base_position_W  # the start pose itself
     x0[problem._x_slices["theta"]] = start.joints_rad.ravel()
@@ -238,7 +238,7 @@ def test_theta2_keeps_leg_links_off_the_terrain(dog, name, x):
     x0[problem._x_slices["phi"]] = coords_from_pose(start.pose)[3:]
     g = np.array(problem._g_fun(x0, p)).ravel()[problem._g_slices["leg_clearance"]]
     links = leg_links(dog)
-    for row, c in zip(g, problem._link_caps, strict=True):
+    for row, c in zip(g, problem._link_blocks["leg_clearance"][1], strict=True):
         w = wit[c]
         if w is None:
             assert row == pytest.approx(1.0)  # inactive

@@ -175,7 +175,7 @@ class LocalPlanner:
         self.mu = float(terrain.spec.get("friction", 0.7) if mu is None else mu)
         self.settings = settings or LocalSettings()
         self.kin = kinematics_of(robot)
-        self._theta2: dict[tuple[int, ...], Theta2] = {}
+        self._theta2: dict[tuple[tuple[int, ...], bool], Theta2] = {}
         self._theta3: dict[int, Theta3] = {}
         self._theta1: dict[tuple[int, ...], Theta1] = {}
         self.stats = {
@@ -192,12 +192,17 @@ class LocalPlanner:
         self.torques = TorqueCheck(robot)
 
     # ---- problems, built once per support pattern / leg --------------------------------
-    def theta2(self, support) -> Theta2:
-        """Theta2 for a support pattern (built on first use)."""
-        key = tuple(sorted(support))
+    def theta2(self, support, landing: bool = False) -> Theta2:
+        """Theta2 for a support pattern, landing-ready or not (built on first use)."""
+        key = (tuple(sorted(support)), bool(landing) and len(support) == 3)
         if key not in self._theta2:
             self._theta2[key] = Theta2(
-                self.robot, self.terrain, support=key, options=self.settings.theta, mu=self.mu
+                self.robot,
+                self.terrain,
+                support=key[0],
+                options=self.settings.theta,
+                mu=self.mu,
+                landing=key[1],
             )
         return self._theta2[key]
 
@@ -282,7 +287,8 @@ class LocalPlanner:
         support = tuple(i for i in range(4) if i != leg)
         rc = self.body_target(state, leg, shrink)
         u_f, u_n = reference_directions(tau, self.terrain, rc)
-        sol = self.theta2(support).solve(state, rc, u_f, u_n, swing_target_W)
+        landing = swing_target_W is not None
+        sol = self.theta2(support, landing).solve(state, rc, u_f, u_n, swing_target_W)
         self._count("theta2", sol.feasible)
         if not sol.feasible:
             return sol, []
@@ -297,7 +303,7 @@ class LocalPlanner:
             # rolled feet, and interpolate to that pose
             rolled = state.copy()
             rolled.feet_W = path[-1].feet_W.copy()
-            again = self.theta2(support).solve(rolled, rc, u_f, u_n, swing_target_W)
+            again = self.theta2(support, landing).solve(rolled, rc, u_f, u_n, swing_target_W)
             self._count("theta2", again.feasible)
             if again.feasible:
                 again.state.support = support
@@ -326,7 +332,7 @@ class LocalPlanner:
 
         Beyond the paper: the leaf's straight line in exponential coordinates (eq. 6b) can
         sweep a thigh or shank past a step edge although both ends clear it. Theta1 (the
-        COM held where the failing sample has it, leg links clear by the keyframe margin)
+        COM held where the first failing sample has it, leg links clear by the keyframe margin)
         picks a via pose on the same leaf there; the move is then start -> via -> end.
         Returns the new path, or None when Theta1 finds no via pose.
         """
@@ -340,7 +346,7 @@ class LocalPlanner:
             )
             for s in path
         ]
-        k = int(np.argmin(worst))
+        k = next((i for i, m in enumerate(worst) if m < 0.0), int(np.argmin(worst)))
         probe = path[k].copy()
         probe.feet_W = start.feet_W.copy()
         support = end.support

@@ -318,27 +318,29 @@ class ThetaProblem:
         self.constrain("sigma1", s1 - ca.dot(u_f, R[:, 0]))
         self.constrain("sigma2", s2 - ca.dot(u_n, R[:, 2]))
 
-    def constrain_leg_links(self, pos, R, thetas: dict) -> None:
+    def constrain_leg_links(self, pos, R, thetas: dict, name: str = "leg_clearance") -> None:
         """Thigh and shank capsules of the legs in ``thetas`` (leg -> its 3 joint SX) clear.
 
         Beyond the paper (planner.links): for each capsule a half-space constraint
-        n . (a + u (b - a) - w) >= radius + margin + WITNESS_SLACK_M, with w the sharp-terrain
-        point nearest the capsule's axis, n the unit vector from w to the axis and u where
-        along the axis (parameters, :meth:`solve_rounds` picks them at each round from the
-        pose reached: constraint generation, as for the body's clearance points). At the
-        witness this is the exact distance; elsewhere the plane is a conservative local
-        model of the terrain. A capsule farther than ``planner.links.WITNESS_SEARCH_M``
-        gets an inactive row (n = 0). The margin grows with the witness's distance from
-        the leg's foot (:data:`planner.links.KEYFRAME_ANGLE_RAD`): execution errors turn
-        a stance leg about its foot.
+        n . (a + u (b - a) - w) >= radius + margin + WITNESS_SLACK_M, with w the
+        sharp-terrain point nearest the capsule's axis, n the unit vector from w to the
+        axis and u where along the axis (parameters, :meth:`solve_rounds` picks them at
+        each round from the pose reached: constraint generation, as for the body's
+        clearance points). At the witness this is the exact distance; elsewhere the plane
+        is a conservative local model of the terrain. A capsule farther than
+        ``planner.links.WITNESS_SEARCH_M`` gets an inactive row (n = 0). The margin grows
+        with the witness's distance from the leg's foot (planner.links'
+        ``KEYFRAME_ANGLE_RAD``): execution errors turn a stance leg about its foot.
+        ``name`` names the constraint group; the pose whose witnesses are used is
+        :meth:`_link_state` of it (the solution's, or another pose of the same solve).
         """
         from planner.links import leg_links
 
         links = leg_links(self.robot)
-        self._link_legs = sorted(thetas)
         caps = [c for c, cap in enumerate(links.capsules) if cap.leg in thetas]
-        self._link_caps = caps
-        w = ca.reshape(self.par("link_witnesses", 8 * len(caps)), 8, -1)
+        self._link_blocks = getattr(self, "_link_blocks", {})
+        self._link_blocks[name] = (sorted(thetas), caps)
+        w = ca.reshape(self.par(f"{name}_witnesses", 8 * len(caps)), 8, -1)
         rows = []
         for k, c in enumerate(caps):
             a_B, b_B = links.ends_B_ca(c, thetas[links.capsules[c].leg])
@@ -346,15 +348,19 @@ class ThetaProblem:
             b = ca.mtimes(R, b_B) + pos
             point = a + w[0, k] * (b - a)
             rows.append(ca.dot(w[4:7, k], point - w[1:4, k]) - w[7, k])
-        self.constrain("leg_clearance", ca.vertcat(*rows), 0.0, np.inf)
+        self.constrain(name, ca.vertcat(*rows), 0.0, np.inf)
 
-    def _link_witness_params(self, witnesses: list) -> np.ndarray:
-        """The ``link_witnesses`` block for :meth:`constrain_leg_links` (8 per capsule)."""
+    def _link_state(self, name: str, state: State, x: np.ndarray) -> State:
+        """The pose whose links the group ``name`` holds (default: the solution's)."""
+        return state
+
+    def _link_witness_params(self, witnesses: list, name: str = "leg_clearance") -> np.ndarray:
+        """The witness block of group ``name`` (:meth:`constrain_leg_links`), 8 per capsule."""
         from planner.links import leg_links
 
         links = leg_links(self.robot)
         out = []
-        for c in self._link_caps:
+        for c in self._link_blocks[name][1]:
             w = witnesses[c]
             if w is None:
                 out.append([0.0, 0, 0, 0, 0, 0, 0, -1.0])  # 0 - (-1) >= 0: inactive
@@ -439,7 +445,7 @@ class ThetaProblem:
         """
         out = np.zeros(self._p_sym.numel())
         for name, sl in self._p_slices.items():
-            if name in ("clearance_points_B", "link_witnesses") and name not in values:
+            if (name == "clearance_points_B" or name.endswith("_witnesses")) and name not in values:
                 continue
             if name not in values:
                 raise KeyError(f"{self.name}: parameter '{name}' missing")
@@ -498,30 +504,32 @@ class ThetaProblem:
         x = np.clip(np.asarray(x0, dtype=float), self.lbx, self.ubx)
         p = np.array(p, dtype=float)
         picked = self._p_slices.get("clearance_points_B")
-        links = self._p_slices.get("link_witnesses")
-        generated = picked is not None or links is not None
+        blocks = getattr(self, "_link_blocks", {})
+        generated = picked is not None or bool(blocks)
         iterations, solve_time = 0, 0.0
         state = self._state_from_x(x, p) if generated else None
-        witnesses = None
+        witnesses = {}
         for _ in range(CLEARANCE_ROUNDS):
             t0 = time.perf_counter()
             if picked is not None:
                 p[picked] = self._lowest_points_B(state).ravel()
-            if links is not None:
-                if witnesses is None:
-                    witnesses = self.check.leg_clearance(state, self._link_legs)[1]
-                p[links] = self._link_witness_params(witnesses)
+            for name, (legs, _) in blocks.items():
+                if name not in witnesses:
+                    at = self._link_state(name, state, x)
+                    witnesses[name] = self.check.leg_clearance(at, legs)[1]
+                p[self._p_slices[f"{name}_witnesses"]] = self._link_witness_params(
+                    witnesses[name], name
+                )
             x, status, n = inner(p, x)
             solve_time += time.perf_counter() - t0
             iterations += n
             x = np.clip(x, self.lbx, self.ubx) if np.all(np.isfinite(x)) else x
             state = self._state_from_x(x, p)
             violations = self._violations(state, x, p)
-            if links is not None:
-                violations["leg_clearance"], witnesses = self.check.leg_clearance(
-                    state, self._link_legs
-                )
-            again = ("clearance", "leg_clearance") if generated else ()
+            for name, (legs, _) in blocks.items():
+                at = self._link_state(name, state, x)
+                violations[name], witnesses[name] = self.check.leg_clearance(at, legs)
+            again = ("clearance", *blocks) if generated else ()
             if not any(violations.get(k, 0.0) > FEASIBILITY_TOL for k in again):
                 break
         return x, p, status, iterations, state, violations, solve_time
@@ -569,6 +577,10 @@ class ThetaProblem:
             "com": ": the COM target cannot be reached with these footholds",
             "clearance": ": the body box P would touch the terrain; lower clearance_m?",
             "leg_clearance": ": a thigh or shank would come too near the terrain (an edge)",
+            "landing_clearance": ": the swinging leg's thigh or shank would meet the terrain"
+            " (an edge) when its foot lands on the next foothold",
+            "landing": ": the swinging leg cannot reach its next foothold from this body pose",
+            "reach": ": a stance leg would be stretched to its reach",
             "forces": ": no eq. 5 forces inside the friction cones; the COM is outside the"
             " support or the slope too steep",
             "foot_on_terrain": ": the swing foot cannot reach the terrain",

@@ -21,6 +21,11 @@ hip centre of the leg about to swing must lie within ``SWING_REACH_FRACTION`` of
 of the sphere centre at the foothold it will be placed at (parameter ``swing_target_W``).
 Without it the body drifts to where the COM target wants it and leaves a lagging leg
 unable to reach its next foothold (the planner then stalls on steps and slopes).
+With ``landing=True`` it is also *landing-ready*: three more variables, the swing leg's
+joints at touch-down, must put its foot on the target's sphere centre from this body pose
+with its thigh and shank clear of the terrain (planner.links margins). Stepping down an
+edge, the body then moves to where the shank can pass the edge, which Theta3 (body fixed)
+cannot do.
 """
 
 from __future__ import annotations
@@ -44,6 +49,8 @@ from planner.state import S0, State
 
 SWING_REACH_FRACTION = 0.92  # swing-ready: hip within this fraction of reach of the target
 NO_SWING_TARGET_M = 1e3  # reach bound that switches the swing-ready constraint off
+STANCE_REACH_FRACTION = 0.96  # body-move ends keep every hip within this of its foot's reach
+LANDING_WEIGHT = 0.1  # gamma of the landing joints' closeness to theta_nor (keeps them defined)
 
 
 class Theta2(ThetaProblem):
@@ -52,10 +59,19 @@ class Theta2(ThetaProblem):
     name = "Theta2"
     fix_com = False
 
-    def __init__(self, robot, terrain, support=(0, 1, 2, 3), options=None, mu: float = 0.7):
+    def __init__(
+        self,
+        robot,
+        terrain,
+        support=(0, 1, 2, 3),
+        options=None,
+        mu: float = 0.7,
+        landing: bool = False,
+    ):
         self.support = tuple(sorted(int(i) for i in support))
         if len(self.support) not in (3, 4):
             raise ValueError(f"support must name 3 or 4 legs, got {support!r}")
+        self.landing = bool(landing) and len(self.support) == 3
         super().__init__(robot, terrain, options or ThetaOptions(), mu)
 
     def _declare(self) -> None:
@@ -75,6 +91,18 @@ class Theta2(ThetaProblem):
 
         R = self.rotation(phi)
         self.constrain("contact", ca.vec(self.kin.feet_W_ca(pos, R, th)) - centres)
+        # reach margin: no stance leg ends stretched to its reach (a singular leg cannot
+        # follow the few millimetres its rolling foot moves, nor correct a tracking error)
+        hips_B = [
+            hip_centre_B(lg) if hip_centre_B(lg) is not None else lg.points_B[0] for lg in r.legs
+        ]
+        centre_cols = ca.reshape(centres, 3, 4)
+        stretch = [
+            ca.sumsqr(ca.mtimes(R, ca.DM(hips_B[i])) + pos - centre_cols[:, i])
+            - (STANCE_REACH_FRACTION * float(r.reach_m[i])) ** 2
+            for i in range(4)
+        ]
+        self.constrain("reach", ca.vertcat(*stretch), -np.inf, 0.0)
         self.constrain_body_pose(pos, R, phi, s1, s2, u_f, u_n)
         self.constrain_leg_links(pos, R, {i: th[3 * i : 3 * i + 3] for i in range(4)})
         com = com_W_ca(self, pos, R, th)
@@ -90,6 +118,16 @@ class Theta2(ThetaProblem):
             reach = self.par("swing_reach_m", 1)
             d = hip_W - target
             self.constrain("swing_ready", ca.dot(d, d) - reach**2, -np.inf, 0.0)
+        if self.landing:
+            # landing-ready: the swing leg's joints at touch-down (from this body pose) reach
+            # the target's sphere centre with thigh and shank clear of the terrain
+            th_land = self.var("theta_land", 3, r.lower_rad[leg], r.upper_rad[leg])
+            land_W = ca.mtimes(R, self.kin.foot_B_ca(leg, th_land)) + pos
+            self.constrain("landing", land_W - target)
+            self.constrain_leg_links(pos, R, {leg: th_land}, name="landing_clearance")
+            self.maximise_log(
+                "sigma_land", LANDING_WEIGHT, sigma3_ca(th_land - ca.DM(r.theta_nor[leg]), o)
+            )
         if o.forces and not self.fix_com:
             feet_cols = ca.reshape(feet, 3, 4)
             normal_cols = ca.reshape(normals, 3, 4)
@@ -110,6 +148,19 @@ class Theta2(ThetaProblem):
             )
             self.constrain("sigma5", ratio - s5, 0.0, np.inf)
             self.maximise_log("sigma5", o.weights[4], s5)
+            if self.landing:
+                # balance holds with the swing leg's mass at touch-down too (the COM set of
+                # feasible eq. 5 forces is convex: the swing's COM between the two holds)
+                (leg,) = set(range(4)) - set(self.support)
+                th_all = ca.vertcat(
+                    *[th_land if i == leg else th[3 * i : 3 * i + 3] for i in range(4)]
+                )
+                F_land = self._eq5_forces_ca(feet_cols, com_W_ca(self, pos, R, th_all))
+                cone = statics.friction_cone_residuals_ca(
+                    F_land, self.mu, self.support, ns, eps_N=o.friction_eps_N
+                )
+                self.constrain("forces_landing_normal", cone[0::2], fmin, np.inf)
+                self.constrain("forces_landing_cone", cone[1::2], 0.0, np.inf)
         d_theta = th - ca.DM(r.theta_nor.ravel())
         self.maximise_log("sigma1", o.weights[0], s1)
         self.maximise_log("sigma2", o.weights[1], s2)
@@ -128,8 +179,12 @@ class Theta2(ThetaProblem):
         :func:`planner.statics.equilibrating_forces` (tested).
         """
         weight = -self.robot.total_mass_kg * ca.DM(statics.GRAVITY_W)  # -m g
-        centroid = self.par("support_centroid", 3)
-        s_inv = ca.reshape(self.par("support_S_inv", 9), 3, 3)
+        if not hasattr(self, "_eq5_pars"):  # declared once, shared by every call
+            self._eq5_pars = (
+                self.par("support_centroid", 3),
+                ca.reshape(self.par("support_S_inv", 9), 3, 3),
+            )
+        centroid, s_inv = self._eq5_pars
         w = weight / len(self.support)
         u = ca.mtimes(s_inv, ca.cross(com - centroid, weight))
         zero = ca.SX.zeros(3, 1)
@@ -166,6 +221,8 @@ class Theta2(ThetaProblem):
                     self.terrain, np.asarray(swing_target_W, float), self.robot.foot_radius_m
                 )
                 reach = SWING_REACH_FRACTION * float(self.robot.reach_m[leg])
+            if self.landing and swing_target_W is None:
+                raise ValueError("Theta2(landing=True) needs the swing target")
             values |= {"swing_target_W": target, "swing_reach_m": [reach]}
         if "support_S_inv" in self._p_slices:
             centroid, s_inv = self.support_geometry(start.feet_W)
@@ -204,7 +261,29 @@ class Theta2(ThetaProblem):
         ]
         if "s5" in self._x_slices:
             x.append([0.5])
-        return np.concatenate([np.asarray(v, float).ravel() for v in x])
+        out = np.concatenate([np.asarray(v, float).ravel() for v in x])
+        if "theta_land" in self._x_slices:  # variables are declared in this order
+            out = np.insert(out, self._x_slices["theta_land"].start, self._landing_guess(start, p))
+        return out
+
+    def _landing_guess(self, start: State, p: np.ndarray) -> np.ndarray:
+        """Landing joints: IK of the swing target from the start pose, else theta_nor."""
+        (leg,) = set(range(4)) - set(self.support)
+        centre_B = start.base_rotation_W.T @ (
+            p[self._p_slices["swing_target_W"]] - start.base_position_W
+        )
+        ik = self.kin.ik_leg(leg, centre_B, reference_rad=start.joints_rad[leg])
+        return ik.joints_rad if ik.reachable else self.robot.theta_nor[leg].copy()
+
+    def _link_state(self, name: str, state: State, x: np.ndarray) -> State:
+        """The touch-down pose for ``landing_clearance``: the swing leg at theta_land."""
+        if name != "landing_clearance":
+            return state
+        (leg,) = set(range(4)) - set(self.support)
+        landed = state.copy()
+        landed.joints_rad = state.joints_rad.copy()
+        landed.joints_rad[leg] = self.x_block(x, "theta_land")
+        return landed
 
     def _com_shifted(self, start: State, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Body position and (4, 3) joints with the COM moved toward r_c* (same feet)."""
@@ -238,7 +317,17 @@ class Theta2(ThetaProblem):
 
     def _violations(self, state: State, x, p) -> dict[str, float]:
         ck = self.check
+        cen = p[self._p_slices["centres_W"]].reshape(4, 3)
+        far = 0.0
+        for i, lg in enumerate(self.robot.legs):
+            hip_B = hip_centre_B(lg)
+            hip_B = lg.points_B[0] if hip_B is None else hip_B
+            d = float(
+                np.linalg.norm(state.base_rotation_W @ hip_B + state.base_position_W - cen[i])
+            )
+            far = max(far, d - STANCE_REACH_FRACTION * float(self.robot.reach_m[i]))
         v = {
+            "reach": far,
             "contact": ck.contacts(state, range(4)),
             "joint_limits": ck.joint_limits(state),
             "clearance": ck.clearance(state),
@@ -252,6 +341,15 @@ class Theta2(ThetaProblem):
             hip_W = state.base_rotation_W @ hip_B + state.base_position_W
             d = float(np.linalg.norm(hip_W - p[self._p_slices["swing_target_W"]]))
             v["swing_ready"] = max(d - float(p[self._p_slices["swing_reach_m"]][0]), 0.0)
+            if self.landing:
+                landed = self._link_state("landing_clearance", state, x)
+                if self.options.forces:
+                    v["forces_landing"] = max(ck.forces(landed, self.support, self.mu)[0], 0.0)
+                foot = (
+                    state.base_rotation_W @ self.kin.foot_B(leg, landed.joints_rad[leg])
+                    + state.base_position_W
+                )
+                v["landing"] = float(np.linalg.norm(foot - p[self._p_slices["swing_target_W"]]))
         if self.fix_com:
             rc = p[self._p_slices["rc_star"]]
             v["com"] = float(np.linalg.norm(ck.com_W(state) - rc))
