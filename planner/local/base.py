@@ -44,6 +44,9 @@ BODY_CLEARANCE_M = 0.005  # least height of the body's bottom above the sharp te
 TARGET_RADIUS_M = 0.01  # a placed foot lands within this of its (edge-free) target [m]
 WIDE_TARGET_RADIUS_M = 0.04  # ... or this, when the leg's links forbid the near footholds
 TORQUE_FRACTION = 0.8  # joint torque / URDF effort the servos may need to hold a sample
+# feedback (8.3) starts paths at a measured state that may already lack a margin by a
+# fraction of a millimetre; a path from it may not lose more than this (or 1 % torque)
+START_SLACK_M = 1e-4
 
 
 @dataclass
@@ -435,7 +438,8 @@ class LocalPlanner:
         the URDF effort, :mod:`planner.torques`: a saturated servo cannot track). Every
         sample is checked with IK and the exact friction-cone test
         (:func:`planner.statics.static_feasibility`), with a margin of
-        ``settings.balance_margin_frac`` x m g.
+        ``settings.balance_margin_frac`` x m g. A start that already lacks a clearance or
+        torque margin (a measured state, 8.3) is accepted; the path may not lose more.
         """
         from planner.statics import static_feasibility
 
@@ -446,10 +450,13 @@ class LocalPlanner:
                 legs = ", ".join(LEG_NAMES[i] for i in s.info.get("unreachable_legs", []))
                 return f"sample {k} of the path leaves the reach of {legs or 'a leg'}"
         pts_B = self._bottom_B
+        body_floor = BODY_CLEARANCE_M
         for k, s in enumerate(path):
             pts = pts_B @ s.base_rotation_W.T + s.base_position_W
             gap = pts[:, 2] - np.asarray(self.terrain.height_sharp(pts[:, 0], pts[:, 1]))
-            if float(gap.min()) < BODY_CLEARANCE_M:
+            if k == 0:  # a measured start may lack the margin: the path must not lose more
+                body_floor = min(BODY_CLEARANCE_M, float(gap.min()) - START_SLACK_M)
+            if float(gap.min()) < body_floor:
                 return (
                     f"the body passes {float(gap.min()) * 1000:.1f} mm above the terrain at "
                     f"sample {k} of the path (less than {BODY_CLEARANCE_M * 1000:.0f} mm)"
@@ -458,11 +465,14 @@ class LocalPlanner:
         qs = [
             self.robot.q_from(s.base_position_W, s.base_quaternion_xyzw, s.joints_rad) for s in path
         ]
+        floor = None
         for k, (s, q) in enumerate(zip(path, qs, strict=True)):
             swing = [i for i in range(4) if not s.in_contact[i]]
             short = links.path_margin(self.terrain, q, swing)
-            c = int(np.argmin(short))
-            if short[c] < 0.0:
+            if floor is None:  # as for the body: not below what the start already has
+                floor = np.minimum(short - START_SLACK_M, 0.0)
+            c = int(np.argmin(short - floor))
+            if short[c] < floor[c]:
                 return (
                     f"the {links.describe(c)} comes {-short[c] * 1000:.1f} mm nearer the terrain "
                     f"than its path margin at sample {k} of the path"
@@ -484,10 +494,13 @@ class LocalPlanner:
                     f"balance lost at sample {k} of the path (friction-cone margin "
                     f"{res.margin_N:.2f} N < {need:.2f} N): the COM leaves the support"
                 )
+        ceiling = TORQUE_FRACTION
         for k, (s, q) in enumerate(zip(path, qs, strict=True)):
             sup = np.flatnonzero(s.in_contact)
             tq = self.torques.solve(q, sup, self.mu, self.terrain.normal(s.feet_W))
-            if not tq.ratio <= TORQUE_FRACTION:
+            if k == 0 and np.isfinite(tq.ratio):  # a measured start: no more than it needs
+                ceiling = max(TORQUE_FRACTION, tq.ratio + 0.01)
+            if not tq.ratio <= ceiling:
                 j = max(tq.worst_joint, 0)
                 return (
                     f"joint {self.robot.joint_names[j]} needs {100 * tq.ratio:.0f} % of its "
