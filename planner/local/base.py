@@ -30,7 +30,7 @@ from planner.heuristics import (
 )
 from planner.interpolate import default_clearance_m, interpolate_leaf, interpolate_swing
 from planner.kinematics import kinematics_of
-from planner.links import leg_links
+from planner.links import PATH_MARGIN_M, leg_links
 from planner.local.gait_queue import CRAWL
 from planner.problems import Theta1, Theta2, Theta3, Theta4, ThetaOptions
 from planner.problems.base import ConstraintCheck
@@ -45,8 +45,10 @@ TARGET_RADIUS_M = 0.01  # a placed foot lands within this of its (edge-free) tar
 WIDE_TARGET_RADIUS_M = 0.04  # ... or this, when the leg's links forbid the near footholds
 TORQUE_FRACTION = 0.8  # joint torque / URDF effort the servos may need to hold a sample
 # feedback (8.3) starts paths at a measured state that may already lack a margin by a
-# fraction of a millimetre; a path from it may not lose more than this (or 1 % torque)
+# fraction of a millimetre; a path from it may not lose more than this
 START_SLACK_M = 1e-4
+MAX_START_TORQUE_FRACTION = 0.9  # ... but never past this (nor below zero clearance):
+# without the bounds, each path could lose a little more than the last (a ratchet)
 
 
 @dataclass
@@ -455,7 +457,7 @@ class LocalPlanner:
             pts = pts_B @ s.base_rotation_W.T + s.base_position_W
             gap = pts[:, 2] - np.asarray(self.terrain.height_sharp(pts[:, 0], pts[:, 1]))
             if k == 0:  # a measured start may lack the margin: the path must not lose more
-                body_floor = min(BODY_CLEARANCE_M, float(gap.min()) - START_SLACK_M)
+                body_floor = max(min(BODY_CLEARANCE_M, float(gap.min()) - START_SLACK_M), 0.0)
             if float(gap.min()) < body_floor:
                 return (
                     f"the body passes {float(gap.min()) * 1000:.1f} mm above the terrain at "
@@ -470,7 +472,7 @@ class LocalPlanner:
             swing = [i for i in range(4) if not s.in_contact[i]]
             short = links.path_margin(self.terrain, q, swing)
             if floor is None:  # as for the body: not below what the start already has
-                floor = np.minimum(short - START_SLACK_M, 0.0)
+                floor = np.clip(short - START_SLACK_M, -PATH_MARGIN_M, 0.0)
             c = int(np.argmin(short - floor))
             if short[c] < floor[c]:
                 return (
@@ -499,7 +501,7 @@ class LocalPlanner:
             sup = np.flatnonzero(s.in_contact)
             tq = self.torques.solve(q, sup, self.mu, self.terrain.normal(s.feet_W))
             if k == 0 and np.isfinite(tq.ratio):  # a measured start: no more than it needs
-                ceiling = max(TORQUE_FRACTION, tq.ratio + 0.01)
+                ceiling = max(TORQUE_FRACTION, min(tq.ratio, MAX_START_TORQUE_FRACTION))
             if not tq.ratio <= ceiling:
                 j = max(tq.worst_joint, 0)
                 return (
