@@ -15,7 +15,7 @@ planned is kept and returned.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -36,6 +36,7 @@ from planner.problems import Theta1, Theta2, Theta3, Theta4, ThetaOptions
 from planner.problems.base import ConstraintCheck
 from planner.robot import LEG_NAMES
 from planner.rolling import end_keyframe
+from planner.stability import PATH_BALANCE_MARGIN_M, support_margin_m
 from planner.state import State
 from planner.torques import TorqueCheck
 from planner.trajectory import Trajectory
@@ -182,7 +183,7 @@ class LocalPlanner:
         self.kin = kinematics_of(robot)
         self._theta2: dict[tuple[tuple[int, ...], bool], Theta2] = {}
         self._theta3: dict[int, Theta3] = {}
-        self._theta1: dict[tuple[int, ...], Theta1] = {}
+        self._via_theta1: dict[tuple[int, ...], Theta1] = {}
         self.stats = {
             "theta1": [0, 0],
             "theta2": [0, 0],
@@ -355,11 +356,13 @@ class LocalPlanner:
         probe = path[k].copy()
         probe.feet_W = start.feet_W.copy()
         support = end.support
-        if support not in self._theta1:
-            self._theta1[support] = Theta1(
-                self.robot, self.terrain, support=support, options=self.settings.theta, mu=self.mu
+        if support not in self._via_theta1:
+            # the via pose is on four feet: no three-leg tip margin
+            opts = replace(self.settings.theta, balance_margin_m=-np.inf)
+            self._via_theta1[support] = Theta1(
+                self.robot, self.terrain, support=support, options=opts, mu=self.mu
             )
-        sol = self._theta1[support].solve(probe, self.check.com_W(path[k]), u_f, u_n)
+        sol = self._via_theta1[support].solve(probe, self.check.com_W(path[k]), u_f, u_n)
         self._count("theta1", sol.feasible)
         if not sol.feasible:
             return None
@@ -440,8 +443,10 @@ class LocalPlanner:
         the URDF effort, :mod:`planner.torques`: a saturated servo cannot track). Every
         sample is checked with IK and the exact friction-cone test
         (:func:`planner.statics.static_feasibility`), with a margin of
-        ``settings.balance_margin_frac`` x m g. A start that already lacks a clearance or
-        torque margin (a measured state, 8.3) is accepted; the path may not lose more.
+        ``settings.balance_margin_frac`` x m g; on three legs the COM also stays
+        ``planner.stability.PATH_BALANCE_MARGIN_M`` inside the support triangle. A start
+        that already lacks a clearance, torque or balance margin (a measured state, 8.3)
+        is accepted; the path may not lose more.
         """
         from planner.statics import static_feasibility
 
@@ -478,6 +483,19 @@ class LocalPlanner:
                 return (
                     f"the {links.describe(c)} comes {-short[c] * 1000:.1f} mm nearer the terrain "
                     f"than its path margin at sample {k} of the path"
+                )
+        tip_floor = PATH_BALANCE_MARGIN_M
+        for k, s in enumerate(path):
+            sup = np.flatnonzero(s.in_contact)
+            if len(sup) != 3:
+                continue
+            tip = support_margin_m(s.feet_W[sup], self.check.com_W(s))
+            if k == 0:  # a measured start on three legs: no less than it has
+                tip_floor = max(min(PATH_BALANCE_MARGIN_M, tip - START_SLACK_M), 0.0)
+            if tip < tip_floor:
+                return (
+                    f"the COM is {tip * 1000:.1f} mm inside the support triangle at sample "
+                    f"{k} of the path (< {tip_floor * 1000:.0f} mm: a tip-over risk)"
                 )
         for k, s in enumerate(path[1:-1], start=1):
             sup = np.flatnonzero(s.in_contact)

@@ -15,14 +15,18 @@ is cycled; for each leg i_f of S
 A failure (no feasible lambda, or no foothold) moves on to the next leg of S: unlike the
 gait step queue of 8.2, a failed leg waits a whole cycle (section 8.2, comment ii). The
 planner is stuck after ``max_fails_in_row`` failures in a row (two cycles by default).
-Less robust than 8.2: the COM cannot leave tau to find balance.
+Less robust than 8.2: the COM cannot leave tau to find balance. Beyond the paper, one
+freedom: the COM may sit beside tau, by at most ``LATERAL_BAND_M``, on the side of the
+support triangle's incentre. On tau itself a crawl's three-leg COM is 16 mm from the
+diagonal edge at best on flat ground, and MuJoCo tips over below about 20 mm
+(:mod:`planner.stability`); lambda is still searched along tau.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from planner.heuristics import reference_directions
+from planner.heuristics import reference_directions, support_incentre_W
 from planner.interpolate import interpolate_leaf
 from planner.local.base import TORQUE_FRACTION, LocalPlanner, Step, Walk, _Run
 from planner.problems import Theta1
@@ -31,6 +35,7 @@ from planner.state import State
 from planner.trajectory import Trajectory
 
 PROBES = (1.0, 0.5, 0.0, -0.5, -1.0)  # lambda offsets in strides, most ambitious first
+LATERAL_BAND_M = 0.03  # the COM target may sit this far beside tau, toward the incentre
 
 
 class HardPlanner(LocalPlanner):
@@ -63,6 +68,15 @@ class HardPlanner(LocalPlanner):
         res = self.torques.solve(q, sup, self.mu, self.terrain.normal(state.feet_W))
         return bool(res.ratio <= TORQUE_FRACTION)
 
+    def lateral_offset(self, state: State, leg: int, tau: Trajectory, lam: float) -> np.ndarray:
+        """Horizontal offset [m] of the COM target from tau, toward the support incentre."""
+        p = np.asarray(tau.point(lam), float).reshape(3)
+        u_f, _ = reference_directions(tau, self.terrain, p, lam=lam)
+        side = np.cross([0.0, 0.0, 1.0], u_f)
+        side /= max(float(np.linalg.norm(side)), 1e-12)
+        s = float(side @ (support_incentre_W(state, leg) - p))
+        return float(np.clip(s, -LATERAL_BAND_M, LATERAL_BAND_M)) * side
+
     def search_body(self, state: State, leg: int, tau: Trajectory, stride_m: float, target_W):
         """Omega_1 for the body move before ``leg`` swings: (Theta1 solution, lambda) or None.
 
@@ -72,9 +86,10 @@ class HardPlanner(LocalPlanner):
         problem = self.theta1([i for i in range(4) if i != leg])
         lam_now = float(tau.closest_lambda(self.check.com_W(state)))
         lams = [float(tau.clip(lam_now + f * stride_m)) for f in PROBES]
+        offset = self.lateral_offset(state, leg, tau, lam_now)
         last = None
         for k, lam in enumerate(lams):
-            rc = np.asarray(tau.point(lam), float).reshape(3)
+            rc = np.asarray(tau.point(lam), float).reshape(3) + offset
             u_f, u_n = reference_directions(tau, self.terrain, rc, lam=lam)
             sol = problem.solve(state, rc, u_f, u_n, target_W)
             self._count("theta1", sol.feasible)
@@ -88,7 +103,14 @@ class HardPlanner(LocalPlanner):
                 return sol, lam
             # push forward by bisection toward the last infeasible probe (eq. 11)
             res = omega(
-                problem, sol.state, tau, lam, lams[k - 1], max_solves=4, swing_target_W=target_W
+                problem,
+                sol.state,
+                tau,
+                lam,
+                lams[k - 1],
+                com_offset_W=offset,
+                max_solves=4,
+                swing_target_W=target_W,
             )
             self.stats["theta1"][0] += res.solves
             self.stats["theta1"][1] += len(res.xi)

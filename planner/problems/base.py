@@ -35,6 +35,7 @@ import pinocchio as pin
 from planner import statics
 from planner.kinematics import kinematics_of
 from planner.lie import coords_from_pose, pose_from_coords, rotation_from_vector_ca
+from planner.stability import BALANCE_MARGIN_M
 from planner.state import State
 
 FEASIBILITY_TOL = 1e-6  # [m, rad, N]: an independent violation above this is infeasible
@@ -59,6 +60,8 @@ class ThetaOptions:
         terrain (constraint b). Lower it when a step or barrier needs the belly closer.
     forces : impose inequalities (d), (e) on the eq. 5 forces (the paper's default).
     min_normal_force_frac : (d) asks F_i.n_i >= this fraction of m g (strictly positive).
+    balance_margin_m : on three legs, the COM at least this far (horizontally) inside every
+        edge of the support triangle (:mod:`planner.stability`: chosen from MuJoCo falls).
     sigma_floor : lower bound of sigma1, sigma2, sigma5 (orientation stays forward and up).
     whole_body_com : whole-body centre of mass (default) or the body link's (the paper).
     max_iter, tol : IPOPT's iteration cap and tolerance. If a problem fails with
@@ -75,6 +78,7 @@ class ThetaOptions:
     clearance_m: float = 0.02
     forces: bool = True
     min_normal_force_frac: float = 0.02
+    balance_margin_m: float = BALANCE_MARGIN_M
     sigma_floor: float = 0.05
     whole_body_com: bool = True
     friction_eps_N: float = 1e-3

@@ -5,6 +5,9 @@ through the footholds, the joints) is searched. Same variables and constraints a
 :class:`~planner.problems.theta2.Theta2` plus the equality COM = r_c*. With footholds and
 COM fixed the eq. 5 forces are fixed too, so (as the paper says) they are checked once
 before solving: if they leave the cones, no orientation can help and the solve is skipped.
+On three legs the precheck also asks the COM ``options.balance_margin_m`` inside the support
+triangle (:mod:`planner.stability`): Omega's largest feasible lambda then stops short of
+the edge by that margin instead of at it.
 Objective: sigma1 * sigma2 * sigma3 (as logs).
 """
 
@@ -17,6 +20,7 @@ import numpy as np
 from planner import statics
 from planner.problems.base import ThetaSolution
 from planner.problems.theta2 import Theta2
+from planner.stability import support_margin_m
 from planner.state import State
 
 
@@ -42,6 +46,13 @@ class Theta1(Theta2):
                 return False, f"leg {i + 1}: eq. 5 normal force {fn:.3g} N below {fmin:.3g} N"
             if ft > self.mu * fn:
                 return False, f"leg {i + 1}: eq. 5 force outside the friction cone"
+        if len(self.support) == 3:  # and a margin from tipping (planner.stability)
+            have = support_margin_m(start.feet_W[list(self.support)], rc_star_W)
+            if have < self.options.balance_margin_m:
+                return False, (
+                    f"the COM is {1000 * have:.1f} mm inside the support triangle "
+                    f"(< {1000 * self.options.balance_margin_m:.0f} mm)"
+                )
         return True, ""
 
     def solve(self, start: State, rc_star_W, u_f, u_n, swing_target_W=None) -> ThetaSolution:

@@ -33,7 +33,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from planner import statics
+from planner import stability, statics
 from planner.kinematics import hip_centre_B
 from planner.lie import coords_from_pose
 from planner.problems.base import (
@@ -147,6 +147,14 @@ class Theta2(ThetaProblem):
                 ]
             )
             self.constrain("sigma5", ratio - s5, 0.0, np.inf)
+            if len(self.support) == 3:  # the COM inside the support triangle with margin
+                tri = [feet_cols[:, i] for i in self.support]
+                self.constrain(
+                    "balance_margin",
+                    stability.support_margins_ca(tri, com),
+                    o.balance_margin_m,
+                    np.inf,
+                )
             self.maximise_log("sigma5", o.weights[4], s5)
             if self.landing:
                 # balance holds with the swing leg's mass at touch-down too (the COM set of
@@ -161,6 +169,12 @@ class Theta2(ThetaProblem):
                 )
                 self.constrain("forces_landing_normal", cone[0::2], fmin, np.inf)
                 self.constrain("forces_landing_cone", cone[1::2], 0.0, np.inf)
+                self.constrain(
+                    "balance_margin_landing",
+                    stability.support_margins_ca(tri, com_W_ca(self, pos, R, th_all)),
+                    stability.PATH_BALANCE_MARGIN_M,
+                    np.inf,
+                )
         d_theta = th - ca.DM(r.theta_nor.ravel())
         self.maximise_log("sigma1", o.weights[0], s1)
         self.maximise_log("sigma2", o.weights[1], s2)
@@ -350,6 +364,12 @@ class Theta2(ThetaProblem):
                     + state.base_position_W
                 )
                 v["landing"] = float(np.linalg.norm(foot - p[self._p_slices["swing_target_W"]]))
+                if self.options.forces:
+                    need = stability.PATH_BALANCE_MARGIN_M
+                    have = stability.support_margin_m(
+                        state.feet_W[list(self.support)], ck.com_W(landed)
+                    )
+                    v["balance_margin_landing"] = max(need - have, 0.0)
         if self.fix_com:
             rc = p[self._p_slices["rc_star"]]
             v["com"] = float(np.linalg.norm(ck.com_W(state) - rc))
@@ -358,4 +378,7 @@ class Theta2(ThetaProblem):
             state.forces_W = forces
             if self.options.forces:
                 v["forces"] = max(viol, 0.0)
+        if self.options.forces and not self.fix_com and len(self.support) == 3:
+            have = stability.support_margin_m(state.feet_W[list(self.support)], ck.com_W(state))
+            v["balance_margin"] = max(self.options.balance_margin_m - have, 0.0)
         return v

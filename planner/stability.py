@@ -1,0 +1,77 @@
+"""Static stability margin of a three-leg stance (beyond the paper, sections 7.3 and 10).
+
+The margin is the horizontal distance of the centre of mass inside the nearest edge of the
+support triangle (the feet's contact points projected along gravity): how far the COM can
+be pushed before the robot tips over that edge. Eq. 5's forces inside the friction cones
+only ask it to be positive; the robot that executes the plan needs more.
+
+Why ``BALANCE_MARGIN_M``: open-loop MuJoCo runs at the plan's timing (bench physics,
+12 generated and 9 named courses, 1,300 swings) fell only at swings whose planned margin
+was 1-18 mm (15 falls; each within a second of such a swing); no course whose swings all
+kept at least 21 mm fell. Executed feet land 5-10 mm from their planned points, the body
+tilts 1-4 degrees on compliant servos (0.5-1 cm of COM at LittleDog's 15 cm height), and
+the leg that lifts unloads before its planned lift-off. Keyframes ask 25 mm, path
+samples (the swing leg's own mass moves the COM) 20 mm. Both are lengths of LittleDog's
+size; a larger robot's errors scale with its COM height (issue 14).
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+from numpy.typing import ArrayLike
+
+__all__ = [
+    "BALANCE_MARGIN_M",
+    "PATH_BALANCE_MARGIN_M",
+    "support_margin_m",
+    "support_margins_ca",
+]
+
+BALANCE_MARGIN_M = 0.025  # three-leg keyframes: COM this far inside the support triangle
+PATH_BALANCE_MARGIN_M = 0.020  # three-leg path samples (the swing leg's mass moves the COM)
+
+
+def support_margin_m(feet_W: ArrayLike, com_W: ArrayLike) -> float:
+    """Signed horizontal distance [m] of ``com_W`` inside the triangle of three feet.
+
+    ``feet_W`` (3, 3) are the support contact points in any order; positive inside,
+    negative outside. A degenerate (collinear) triangle gives minus the distance to it.
+    """
+    tri = np.asarray(feet_W, dtype=float).reshape(3, 3)[:, :2]
+    p = np.asarray(com_W, dtype=float).reshape(-1)[:2]
+    area2 = _cross(tri[1] - tri[0], tri[2] - tri[0])
+    if abs(area2) < 1e-12:
+        return -float(min(np.linalg.norm(tri - p, axis=1)))
+    sign = 1.0 if area2 > 0 else -1.0
+    out = np.inf
+    for a, b in ((0, 1), (1, 2), (2, 0)):
+        e = tri[b] - tri[a]
+        out = min(out, sign * _cross(e, p - tri[a]) / float(np.linalg.norm(e)))
+    return float(out)
+
+
+def support_margins_ca(feet_W: list, com_W) -> ca.MX:
+    """The three edge distances [m] of the COM inside a triangle of feet (CasADi).
+
+    ``feet_W``: three 3-vectors (parameters: the feet are fixed on a leaf, so the sign of
+    the orientation is constant); ``com_W``: the COM expression. Each entry is positive
+    when the COM is on the inner side of that edge; the margin is their minimum.
+    """
+    xy = [f[:2] for f in feet_W]
+    c = com_W[:2]
+    area2 = _cross_ca(xy[1] - xy[0], xy[2] - xy[0])
+    sign = ca.sign(area2)
+    rows = []
+    for a, b in ((0, 1), (1, 2), (2, 0)):
+        e = xy[b] - xy[a]
+        rows.append(sign * _cross_ca(e, c - xy[a]) / ca.sqrt(ca.dot(e, e) + 1e-12))
+    return ca.vertcat(*rows)
+
+
+def _cross(u, v) -> float:
+    return float(u[0] * v[1] - u[1] * v[0])
+
+
+def _cross_ca(u, v):
+    return u[0] * v[1] - u[1] * v[0]

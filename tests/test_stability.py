@@ -1,0 +1,88 @@
+"""The three-leg stability margin: numpy against the statics polygon distance, CasADi
+against numpy, and Theta2 keeping it (planner.stability)."""
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from planner import statics
+from planner.problems import Theta2, Theta4
+from planner.problems.base import FEASIBILITY_TOL
+from planner.robot import load_robot
+from planner.stability import BALANCE_MARGIN_M, support_margin_m, support_margins_ca
+from planner.terrain import load_terrain
+
+
+def _placed(dog, name, x):
+    """The robot placed by Theta4 at x on a named course, and tau's directions there."""
+    terrain = load_terrain(name)
+    p = np.array([x, 0.0, float(terrain.height(np.array(x), np.array(0.0)))])
+    u_n = terrain.smoothed_normal(p, 0.1)
+    u_f = np.array([1.0, 0.0, 0.0]) - u_n[0] * u_n
+    u_f /= np.linalg.norm(u_f)
+    sol = Theta4(dog, terrain).solve(p + [0.0, 0.0, 0.15], u_f, u_n)
+    return terrain, sol, u_f, u_n
+
+
+def _ccw(tri_xy):
+    c = tri_xy.mean(axis=0)
+    ang = np.arctan2(tri_xy[:, 1] - c[1], tri_xy[:, 0] - c[0])
+    return tri_xy[np.argsort(ang)]
+
+
+def test_margin_matches_the_polygon_distance_and_casadi():
+    rng = np.random.default_rng(3)
+    feet = ca.MX.sym("feet", 9)
+    com = ca.MX.sym("com", 3)
+    cols = [feet[3 * i : 3 * i + 3] for i in range(3)]
+    f = ca.Function("m", [feet, com], [ca.mmin(support_margins_ca(cols, com))])
+    for _ in range(200):
+        tri = rng.uniform(-0.2, 0.2, (3, 3))
+        p = rng.uniform(-0.25, 0.25, 3)
+        u, v = tri[1, :2] - tri[0, :2], tri[2, :2] - tri[0, :2]
+        area = abs(u[0] * v[1] - u[1] * v[0])
+        if area < 1e-3:
+            continue
+        got = support_margin_m(tri, p)
+        want = statics.polygon_signed_distance(p[:2], _ccw(tri[:, :2]))
+        if want > 0:  # inside: the distance to the nearest edge line
+            assert got == pytest.approx(want, abs=1e-12)
+        else:  # outside: negative (the edge-line distance is at most the true distance)
+            assert got < 0 and got >= want - 1e-12
+        # order of the feet does not matter, CasADi agrees
+        assert support_margin_m(tri[::-1], p) == pytest.approx(got, abs=1e-12)
+        assert float(f(tri.ravel(), p)) == pytest.approx(got, abs=1e-9)
+
+
+@pytest.fixture(scope="module")
+def dog():
+    return load_robot("littledog")
+
+
+@pytest.mark.parametrize("name,x", [("flat", 0.3), ("slope10", 0.6), ("rough2cm", 0.7)])
+def test_theta2_keeps_the_com_inside_the_triangle(dog, name, x):
+    terrain, placed, u_f, u_n = _placed(dog, name, x)
+    start = placed.state
+    support = (0, 2, 3)  # FR about to swing
+    tri = start.feet_W[list(support)]
+    # a COM target on the FL-HR edge: soft persuasion alone would go most of the way there
+    rc = 0.5 * (tri[0] + tri[2]) + 0.15 * u_n
+    problem = Theta2(dog, terrain, support=support)
+    sol = problem.solve(start, rc, u_f, u_n)
+    assert sol.feasible, sol.diagnosis
+    assert sol.max_violation() < FEASIBILITY_TOL
+    have = support_margin_m(tri, problem.check.com_W(sol.state))
+    assert have >= BALANCE_MARGIN_M - 1e-6
+    assert have < BALANCE_MARGIN_M + 0.01  # it is the margin that holds the COM back
+
+
+def test_a_narrow_triangle_is_reported():
+    terrain = load_terrain("flat")
+    robot = load_robot("littledog")
+    _, placed, u_f, u_n = _placed(robot, "flat", 0.3)
+    start = placed.state.copy()
+    start.feet_W[3, :2] = start.feet_W[2, :2] - [0.0, 0.03]  # HR 3 cm beside HL: a sliver
+    sol = Theta2(robot, terrain, support=(0, 2, 3)).solve(
+        start, start.feet_W[[0, 2, 3]].mean(axis=0) + 0.15 * u_n, u_f, u_n
+    )
+    assert not sol.feasible and "balance_margin" in sol.diagnosis
