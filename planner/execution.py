@@ -261,9 +261,11 @@ def run_feedback(
         else:
             if step.phase == "foot_placement":
                 step_scale[leg] = max(step_scale[leg] * 0.5, st.min_step_fraction)
-            queue.swap(leg)
             fails += 1
+            queue.swap(leg, fails)
             m.replans += 1
+            where = step.moved if step.moved is not None else state
+            local._log_failure(cycles, leg, step.phase, where, step.diagnosis)
         if step.moved is None:
             continue  # the body move failed: nothing to execute
         body_s = float(np.linalg.norm(step.moved.base_position_W - state.base_position_W))

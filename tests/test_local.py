@@ -23,6 +23,21 @@ def test_queue_pop_push_swap():
         GaitQueue([0, 5])
 
 
+def test_queue_gives_every_leg_a_turn_after_failures_in_a_row():
+    # FL and HL cannot step (their triangles are slivers): HR and FR must get their turn
+    q = GaitQueue([0, 2, 3, 1])
+    tried, fails = [], 0
+    for _ in range(4):
+        leg = q.pop()
+        tried.append(leg)
+        if leg in (0, 2):
+            fails += 1
+            q.swap(leg, fails)
+        else:
+            break
+    assert tried[-1] in (1, 3) and len(tried) <= 4  # plain swaps: FL, HL, FL, HL, ...
+
+
 @pytest.fixture(scope="module")
 def flat_planner():
     return SoftPlanner(load_robot("littledog"), load_terrain("flat"))

@@ -3,7 +3,8 @@
 Unlike the fixed gait step sequence S of section 8.1, the queue changes while planning:
 a leg that stepped goes to the back (push); a leg whose step failed changes places with
 the next one (swap), so it is retried right after another leg has moved instead of a whole
-gait cycle later (section 8.2, comment ii).
+gait cycle later (section 8.2, comment ii). After several failures in a row the failed leg
+goes farther back, so that every leg gets its turn before any is retried.
 """
 
 from __future__ import annotations
@@ -38,14 +39,15 @@ class GaitQueue:
         """Put a leg back at the front."""
         self._q.appendleft(int(leg))
 
-    def swap(self, leg: int) -> None:
-        """Reinsert a leg that failed one place back: the next leg goes first."""
-        if self._q:
-            nxt = self._q.popleft()
-            self._q.appendleft(int(leg))
-            self._q.appendleft(nxt)
-        else:
-            self._q.append(int(leg))
+    def swap(self, leg: int, depth: int = 1) -> None:
+        """Reinsert a leg that failed ``depth`` places back: the next legs go first.
+
+        Pass the number of failures in a row as ``depth``: with plain swaps (depth 1) two
+        legs that both cannot step (their support triangles are slivers) would trade
+        places for ever while a third leg, which could step and widen them, never comes.
+        """
+        depth = max(1, min(int(depth), len(self._q)))
+        self._q.insert(depth, int(leg))
 
     def peek(self) -> int:
         """The leg at the front, left in place."""

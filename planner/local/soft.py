@@ -43,8 +43,8 @@ class SoftPlanner(LocalPlanner):
                 self.failed(run, step)
                 if step.phase == "foot_placement":
                     step_scale[leg] = max(step_scale[leg] * 0.5, st.min_step_fraction)
-                queue.swap(leg)
                 fails_in_row += 1
+                queue.swap(leg, fails_in_row)
                 continue
             step_scale[leg] = 1.0
             fails_in_row = 0
