@@ -5,7 +5,7 @@
 :mod:`planner.course_gen`, seeds 0..N-1), a walk with the soft local planner (8.2) from
 (0.2, 0) to (2.2, 0) on a named course, or to (3.0, 0) = the end of a generated course
 minus 0.4 m, validates it (:func:`planner.validate.check_plan`, run by
-:func:`planner.walk.plan_walk`), then executes it with :func:`planner.simulate.simulate_plan`
+:func:`planner.walk.plan_walk`), then executes it with :func:`planner.execution.simulate_plan`
 in each mode, as ``stratawalk simulate`` does:
 
 - ``open``: open loop, the plan's joint set-points (:func:`planner.simulate.run_open_loop`);
@@ -210,7 +210,8 @@ def run_physics_job(job: dict) -> dict:
             row |= {"status": "error", "error": f"planning failed: {planning['error']}"}
         else:
             try:
-                from planner.simulate import SimSettings, simulate_plan
+                from planner.execution import simulate_plan
+                from planner.simulate import SimSettings
 
                 res = simulate_plan(plan, mode, SimSettings(time_scale=float(job["time_scale"])))
                 row |= {"status": "ok"} | _sim_fields(res.metrics.to_dict())

@@ -216,7 +216,7 @@ def build_parser() -> argparse.ArgumentParser:
     from planner.plots import add_plot_parser
 
     add_plot_parser(sub)
-    from planner.simulate import add_simulate_parser
+    from planner.execution import add_simulate_parser
 
     add_simulate_parser(sub)
     from planner.batch import add_batch_parser

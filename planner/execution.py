@@ -5,6 +5,9 @@ A :class:`StateSource` measures the robot: base pose, joint angles and which fee
 it with the MuJoCo simulator of :mod:`planner.simulate`, optionally with Gaussian noise
 and a latency.
 
+The modes behind one call, :func:`simulate_plan`, and the ``stratawalk simulate``
+command are here too (this module uses :mod:`planner.simulate`, never the reverse).
+
 Feedback (8.3), :func:`run_feedback`: every cycle (one gait step) the soft-persuasion
 planner of 8.2 starts from the *measured* configuration: measured base pose and joints,
 the stance feet where the robot's feet actually are (projected onto the terrain), and
@@ -30,7 +33,8 @@ from __future__ import annotations
 import math
 import time as _time
 from dataclasses import dataclass
-from typing import Protocol
+from pathlib import Path
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -44,6 +48,7 @@ from planner.simulate import (
     cycle_starts,
     finish_run,
     new_run,
+    run_open_loop,
 )
 
 __all__ = [
@@ -56,6 +61,9 @@ __all__ = [
     "run_corrected",
     "run_feedback",
     "shift_body",
+    "simulate_plan",
+    "add_simulate_parser",
+    "cmd_simulate",
 ]
 
 _Array = NDArray[np.float64]
@@ -462,3 +470,74 @@ def shift_body(plan: Plan, offset_W: ArrayLike, mask: ArrayLike | None = None) -
     out.samples = Samples(plan.samples.time.copy(), q, plan.samples.contact.copy())
     out._robot_cache, out._terrain_cache = plan._robot_cache, plan._terrain_cache
     return out
+
+
+def simulate_plan(
+    plan: Plan | str | Path,
+    mode: str = "open",
+    settings: SimSettings | None = None,
+    **kwargs: Any,
+) -> SimResult:
+    """Simulate a plan: ``mode`` "open" (open loop), "correct" (8.4) or "feedback" (8.3).
+
+    ``kwargs`` go to :func:`run_corrected` or
+    :func:`run_feedback` (noise, latency, ...).
+    """
+    if not isinstance(plan, Plan):
+        plan = Plan.load(plan)
+    if mode == "open":
+        return run_open_loop(plan, settings)
+    if mode == "correct":
+        return run_corrected(plan, settings, **kwargs)
+    if mode == "feedback":
+        return run_feedback(plan, settings, **kwargs)
+    raise InputError(f"simulate: unknown mode {mode!r}; use open, correct or feedback")
+
+
+# ------------------------------------------------------------------------------ command line
+def add_simulate_parser(subparsers) -> Any:
+    """Add ``simulate plan.json [--feedback|--correct] [--time-scale S] [--out sim.json]``."""
+    p = subparsers.add_parser(
+        "simulate", help="execute a plan in MuJoCo (open loop, feedback 8.3, correction 8.4)"
+    )
+    p.add_argument("plan", help="plan.json written by `stratawalk plan`")
+    mode = p.add_mutually_exclusive_group()
+    mode.add_argument(
+        "--feedback", action="store_true", help="re-plan each step from the measured state (8.3)"
+    )
+    mode.add_argument(
+        "--correct",
+        action="store_true",
+        help="execute the plan, correcting each step from the measured state (8.4)",
+    )
+    p.add_argument("--time-scale", type=float, default=2.0, help="simulated s per plan s")
+    p.add_argument("--timestep", type=float, default=0.001, help="physics step [s]")
+    p.add_argument("--noise-mm", type=float, default=0.0, help="position noise sigma [mm]")
+    p.add_argument("--noise-deg", type=float, default=0.0, help="angle noise sigma [deg]")
+    p.add_argument("--latency", type=float, default=0.0, help="measurement latency [s]")
+    p.add_argument("--seed", type=int, default=0, help="noise seed")
+    p.add_argument("--out", help="write the executed motion here (stratawalk.plan/1)")
+    p.set_defaults(func=cmd_simulate)
+    return p
+
+
+def cmd_simulate(args) -> int:
+    """Run ``stratawalk simulate``; exit 0 when the run is OK, 1 otherwise."""
+    plan = Plan.load(args.plan)
+    settings = SimSettings(time_scale=args.time_scale, timestep_s=args.timestep)
+    settings.control_dt_s = max(settings.control_dt_s, settings.timestep_s)
+    mode = "feedback" if args.feedback else "correct" if args.correct else "open"
+    kwargs = {}
+    if mode != "open":
+        kwargs = {
+            "position_noise_m": args.noise_mm / 1000.0,
+            "angle_noise_rad": math.radians(args.noise_deg),
+            "latency_s": args.latency,
+            "seed": args.seed,
+        }
+    res = simulate_plan(plan, mode, settings, **kwargs)
+    print(res.metrics.summary())
+    if args.out:
+        path = res.executed.save(args.out)
+        print(f"wrote {path}: {len(res.executed.samples)} executed samples")
+    return 0 if res.metrics.ok else 1

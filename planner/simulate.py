@@ -58,14 +58,12 @@ __all__ = [
     "Simulator",
     "TerrainModel",
     "Touches",
-    "add_simulate_parser",
     "build_mjcf",
     "cycle_starts",
     "executed_plan",
     "finish_run",
     "new_run",
     "run_open_loop",
-    "simulate_plan",
     "terrain_model",
 ]
 
@@ -975,76 +973,3 @@ def run_open_loop(plan: Plan, settings: SimSettings | None = None) -> SimResult:
         if not ex.follow(s.time[a : b + 1], s.q[a : b + 1], s.contact[a : b + 1]):
             break
     return finish_run(plan, ex, wall0, t0)
-
-
-def simulate_plan(
-    plan: Plan | str | Path,
-    mode: str = "open",
-    settings: SimSettings | None = None,
-    **kwargs: Any,
-) -> SimResult:
-    """Simulate a plan: ``mode`` "open" (open loop), "correct" (8.4) or "feedback" (8.3).
-
-    ``kwargs`` go to :func:`planner.execution.run_corrected` or
-    :func:`planner.execution.run_feedback` (noise, latency, ...).
-    """
-    if not isinstance(plan, Plan):
-        plan = Plan.load(plan)
-    if mode == "open":
-        return run_open_loop(plan, settings)
-    from planner import execution
-
-    if mode == "correct":
-        return execution.run_corrected(plan, settings, **kwargs)
-    if mode == "feedback":
-        return execution.run_feedback(plan, settings, **kwargs)
-    raise InputError(f"simulate: unknown mode {mode!r}; use open, correct or feedback")
-
-
-# ------------------------------------------------------------------------------ command line
-def add_simulate_parser(subparsers) -> Any:
-    """Add ``simulate plan.json [--feedback|--correct] [--time-scale S] [--out sim.json]``."""
-    p = subparsers.add_parser(
-        "simulate", help="execute a plan in MuJoCo (open loop, feedback 8.3, correction 8.4)"
-    )
-    p.add_argument("plan", help="plan.json written by `stratawalk plan`")
-    mode = p.add_mutually_exclusive_group()
-    mode.add_argument(
-        "--feedback", action="store_true", help="re-plan each step from the measured state (8.3)"
-    )
-    mode.add_argument(
-        "--correct",
-        action="store_true",
-        help="execute the plan, correcting each step from the measured state (8.4)",
-    )
-    p.add_argument("--time-scale", type=float, default=2.0, help="simulated s per plan s")
-    p.add_argument("--timestep", type=float, default=0.001, help="physics step [s]")
-    p.add_argument("--noise-mm", type=float, default=0.0, help="position noise sigma [mm]")
-    p.add_argument("--noise-deg", type=float, default=0.0, help="angle noise sigma [deg]")
-    p.add_argument("--latency", type=float, default=0.0, help="measurement latency [s]")
-    p.add_argument("--seed", type=int, default=0, help="noise seed")
-    p.add_argument("--out", help="write the executed motion here (stratawalk.plan/1)")
-    p.set_defaults(func=cmd_simulate)
-    return p
-
-
-def cmd_simulate(args) -> int:
-    """Run ``stratawalk simulate``; exit 0 when the run is OK, 1 otherwise."""
-    plan = Plan.load(args.plan)
-    settings = SimSettings(time_scale=args.time_scale, timestep_s=args.timestep)
-    settings.control_dt_s = max(settings.control_dt_s, settings.timestep_s)
-    mode = "feedback" if args.feedback else "correct" if args.correct else "open"
-    kwargs = {}
-    if mode != "open":
-        kwargs = {
-            "position_noise_m": args.noise_mm / 1000.0,
-            "angle_noise_rad": math.radians(args.noise_deg),
-            "latency_s": args.latency,
-            "seed": args.seed,
-        }
-    res = simulate_plan(plan, mode, settings, **kwargs)
-    print(res.metrics.summary())
-    if args.out:
-        path = res.executed.save(args.out)
-        print(f"wrote {path}: {len(res.executed.samples)} executed samples")
-    return 0 if res.metrics.ok else 1
