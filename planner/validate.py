@@ -88,6 +88,7 @@ from planner.links import LegLinks
 from planner.plan import Plan
 from planner.robot import LEG_NAMES
 from planner.rolling import sliding
+from planner.stability import support_margin_m
 from planner.torques import TorqueCheck
 
 if TYPE_CHECKING:
@@ -181,8 +182,11 @@ class CheckReport:
     least distance of a thigh or shank capsule to the sharp terrain (exact below 4 mm, a
     lower bound above); ``max_torque_ratio``: largest joint torque over its effort limit
     (with the least demanding forces); ``min_balance_margin_N``:
-    least force margin of the statics test; ``max_slip_m``: largest stance-foot sliding
-    between samples (travel minus rolling). NaN when there was nothing to measure.
+    least force margin of the statics test; ``min_tip_margin_m``: least horizontal
+    distance of the COM inside a three-leg support triangle (a figure, not a test: the
+    planner keeps :data:`planner.stability.PATH_BALANCE_MARGIN_M`); ``max_slip_m``:
+    largest stance-foot sliding between samples (travel minus rolling). NaN when there was
+    nothing to measure.
     """
 
     violations: list[Violation] = field(default_factory=list)
@@ -192,6 +196,7 @@ class CheckReport:
     min_swing_clearance_m: float = math.nan
     min_leg_clearance_m: float = math.nan
     min_balance_margin_N: float = math.nan
+    min_tip_margin_m: float = math.nan
     max_torque_ratio: float = math.nan
     max_slip_m: float = math.nan
     elapsed_s: float = 0.0
@@ -212,7 +217,8 @@ class CheckReport:
             f"min body clearance {_mm(self.min_body_clearance_m)}, min swing clearance "
             f"{_mm(self.min_swing_clearance_m)}, min leg clearance "
             f"{_mm(self.min_leg_clearance_m)}, min balance margin "
-            f"{self.min_balance_margin_N:.3g} N, max joint torque "
+            f"{self.min_balance_margin_N:.3g} N, min three-leg tip margin "
+            f"{_mm(self.min_tip_margin_m)}, max joint torque "
             f"{100 * self.max_torque_ratio:.0f} % of its limit, max stance slip "
             f"{_mm(self.max_slip_m)}"
         )
@@ -832,11 +838,13 @@ class _Checker:
         down = sm.contact
         if down.any():
             normals[down] = self.terrain.normal(contacts[down])
-        worst = math.inf
+        worst = tip = math.inf
         for k in range(len(sm)):
             sup = np.flatnonzero(down[k])
             if len(sup) < 3:
                 continue
+            if len(sup) == 3:
+                tip = min(tip, support_margin_m(contacts[k][sup], coms[k]))
             res = statics.static_feasibility(
                 contacts[k],
                 coms[k],
@@ -861,6 +869,7 @@ class _Checker:
                     f"{coms[k, 2]:.4f}) m: margin {res.margin_N:.3g} N ({res.status})",
                 )
         report.min_balance_margin_N = worst if math.isfinite(worst) else math.nan
+        report.min_tip_margin_m = tip if math.isfinite(tip) else math.nan
 
 
 def _joint_torques(ck: _Checker, contacts: _Array, report: CheckReport) -> None:

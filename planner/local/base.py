@@ -445,7 +445,7 @@ class LocalPlanner:
         (:func:`planner.statics.static_feasibility`), with a margin of
         ``settings.balance_margin_frac`` x m g; on three legs the COM also stays
         ``planner.stability.PATH_BALANCE_MARGIN_M`` inside the support triangle. A start
-        that already lacks a clearance, torque or balance margin (a measured state, 8.3)
+        that already lacks a clearance or torque margin (a measured state, 8.3)
         is accepted; the path may not lose more.
         """
         from planner.statics import static_feasibility
@@ -484,18 +484,18 @@ class LocalPlanner:
                     f"the {links.describe(c)} comes {-short[c] * 1000:.1f} mm nearer the terrain "
                     f"than its path margin at sample {k} of the path"
                 )
-        tip_floor = PATH_BALANCE_MARGIN_M
         for k, s in enumerate(path):
             sup = np.flatnonzero(s.in_contact)
+            if len(sup) == 4 and k == len(path) - 1 and len(s.support) == 3:
+                sup = np.asarray(s.support)  # a body move's end: the leg is about to lift
             if len(sup) != 3:
                 continue
             tip = support_margin_m(s.feet_W[sup], self.check.com_W(s))
-            if k == 0:  # a measured start on three legs: no less than it has
-                tip_floor = max(min(PATH_BALANCE_MARGIN_M, tip - START_SLACK_M), 0.0)
-            if tip < tip_floor:
+            if tip < PATH_BALANCE_MARGIN_M:
                 return (
                     f"the COM is {tip * 1000:.1f} mm inside the support triangle at sample "
-                    f"{k} of the path (< {tip_floor * 1000:.0f} mm: a tip-over risk)"
+                    f"{k} of the path (< {PATH_BALANCE_MARGIN_M * 1000:.0f} mm: a tip-over "
+                    "risk)"
                 )
         for k, s in enumerate(path[1:-1], start=1):
             sup = np.flatnonzero(s.in_contact)
