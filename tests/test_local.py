@@ -9,6 +9,7 @@ from planner.local.soft import SoftPlanner
 from planner.robot import load_robot
 from planner.rolling import sliding
 from planner.terrain import load_terrain
+from planner.trajectory import Trajectory
 
 
 def test_queue_pop_push_swap():
@@ -194,3 +195,22 @@ def test_ctrl_c_keeps_the_plan_so_far(littledog, monkeypatch):
     assert "interrupted (Ctrl-C) after 4 steps" in plan.outcome["message"]
     assert not plan.outcome["reached_goal"] and plan.stats["steps"] == 4
     assert report.ok and check_plan(plan).ok
+
+
+def test_steps_in_place_stop_the_planner(flat_planner):
+    """No progress in ``no_progress_cycles`` cycles is a stop ("stuck"), not a walk on the spot
+    until the time budget (barrier75mm stepped in place for 240 s)."""
+    import time
+
+    from planner.local.base import Walk, _Run
+
+    p = flat_planner
+    tau = Trajectory.straight((0.2, 0.0), (1.2, 0.0), p.terrain, p.com_height_m())
+    run = _Run(np.array([1.2, 0.0]), tau, time.perf_counter())
+    walk = Walk(p, p.initial_state((0.2, 0.0), tau))
+    reasons = []
+    for _ in range(p.settings.no_progress_cycles + 1):
+        reasons.append(p.stop_reason(walk, run))
+        run.cycles += 1
+    assert all(r == "" for r in reasons[:-1])
+    assert reasons[-1].startswith("stuck: no progress")

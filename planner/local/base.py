@@ -48,6 +48,7 @@ TORQUE_FRACTION = 0.8  # joint torque / URDF effort the servos may need to hold 
 # feedback (8.3) starts paths at a measured state that may already lack a margin by a
 # fraction of a millimetre; a path from it may not lose more than this
 START_SLACK_M = 1e-4
+PROGRESS_M = 0.01  # the COM coming this much nearer the goal counts as progress
 MAX_START_TORQUE_FRACTION = 0.9  # ... but never past this (nor below zero clearance):
 # without the bounds, each path could lose a little more than the last (a ratchet)
 
@@ -63,6 +64,8 @@ class LocalSettings:
     goal_tol_m : distance of the COM (xy) to the goal that counts as arrived.
     balance_margin_frac : least friction-cone margin (x m g) at every sample of a path.
     max_fails_in_row : failed step attempts in a row after which the planner is stuck.
+    no_progress_cycles : cycles without the COM coming ``PROGRESS_M`` nearer the goal after
+        which the planner is stuck (steps in place before an obstacle, some failing).
     """
 
     gait: tuple[int, ...] = CRAWL
@@ -78,6 +81,7 @@ class LocalSettings:
     time_budget_s: float = 120.0
     min_step_fraction: float = 0.25
     max_fails_in_row: int = 8
+    no_progress_cycles: int = 32
     balance_margin_frac: float = 0.01
     theta: ThetaOptions = field(default_factory=ThetaOptions)
 
@@ -125,6 +129,8 @@ class _Run:
     progress: object = None
     cycles: int = 0
     last_failure: str = ""
+    best_dist_m: float = float("inf")  # nearest the COM came to the goal ...
+    best_at: int = 0  # ... and in which cycle
 
 
 class Walk:
@@ -632,6 +638,13 @@ class LocalPlanner:
             return f"stopped by the time budget ({st.time_budget_s:.0f} s)"
         if fails_in_row >= st.max_fails_in_row:
             return f"stuck: {fails_in_row} failed step attempts in a row; last: {run.last_failure}"
+        if dist < run.best_dist_m - PROGRESS_M:
+            run.best_dist_m, run.best_at = dist, run.cycles
+        if run.cycles - run.best_at >= st.no_progress_cycles:
+            return (
+                f"stuck: no progress in {st.no_progress_cycles} cycles (the COM came no nearer "
+                f"than {100 * run.best_dist_m:.0f} cm to the goal); last: {run.last_failure}"
+            )
         return ""
 
     def failed(self, run: _Run, step: Step) -> None:
