@@ -269,8 +269,10 @@ class LegLinks:
             b.append(R @ cap.b_J + t)
         return np.array(a), np.array(b)
 
-    def path_margin(self, terrain, q: _Array, swing_legs=()) -> _Array:
+    def path_margin(self, terrain, q: _Array, swing_legs=(), scale: float = 1.0) -> _Array:
         """(C,) least of (clearance bound - path margin) over each capsule's points [m].
+
+        ``scale`` multiplies the margin (0: the clearance bound itself).
 
         Negative: some point of the capsule is nearer the terrain than the path margin
         (``PATH_MARGIN_M`` + ``PATH_ANGLE_RAD`` x its distance to the leg's anchor): by
@@ -279,8 +281,8 @@ class LegLinks:
         """
         gap = self._gaps(terrain, q)
         legs = np.array([cap.leg for cap in self.capsules])[self.owner]
-        need = PATH_MARGIN_M + PATH_ANGLE_RAD * self._anchor_distance(
-            self._points_W, legs, swing_legs
+        need = scale * (
+            PATH_MARGIN_M + PATH_ANGLE_RAD * self._anchor_distance(self._points_W, legs, swing_legs)
         )
         out = np.full(len(self.capsules), np.inf)
         np.minimum.at(out, self.owner, gap - need)
@@ -295,7 +297,7 @@ class LegLinks:
                 continue
             p = a_W[c] + w.u * (b_W[c] - a_W[c])
             d = float(self._anchor_distance(p, cap.leg, swing_legs))
-            need_w = PATH_MARGIN_M + PATH_ANGLE_RAD * d
+            need_w = scale * (PATH_MARGIN_M + PATH_ANGLE_RAD * d)
             out[c] = w.distance_m - cap.radius_m - need_w
         return out
 

@@ -30,7 +30,7 @@ from planner.heuristics import (
 )
 from planner.interpolate import default_clearance_m, interpolate_leaf, interpolate_swing
 from planner.kinematics import kinematics_of
-from planner.links import PATH_MARGIN_M, leg_links
+from planner.links import leg_links
 from planner.local.gait_queue import CRAWL
 from planner.problems import Theta1, Theta2, Theta3, Theta4, ThetaOptions
 from planner.problems.base import ConstraintCheck
@@ -483,13 +483,21 @@ class LocalPlanner:
             swing = [i for i in range(4) if not s.in_contact[i]]
             short = links.path_margin(self.terrain, q, swing)
             if floor is None:  # as for the body: not below what the start already has
-                floor = np.clip(short - START_SLACK_M, -PATH_MARGIN_M, 0.0)
+                floor = np.minimum(short - START_SLACK_M, 0.0)
             c = int(np.argmin(short - floor))
             if short[c] < floor[c]:
                 return (
                     f"the {links.describe(c)} comes {-short[c] * 1000:.1f} mm nearer the terrain "
                     f"than its path margin at sample {k} of the path"
                 )
+            if k == 0:  # a measured start may touch already: no deeper
+                bare = links.path_margin(self.terrain, q, swing, scale=0.0)
+                bare_floor = np.minimum(bare - START_SLACK_M, 0.0)
+            if short.min() < 0.0:  # inside the margin, as the measured start: not touching
+                bare = links.path_margin(self.terrain, q, swing, scale=0.0)
+                c = int(np.argmin(bare - bare_floor))
+                if bare[c] < bare_floor[c]:
+                    return f"the {links.describe(c)} touches the terrain at sample {k} of the path"
         for k, s in enumerate(path):
             sup = np.flatnonzero(s.in_contact)
             if len(sup) == 4 and k == len(path) - 1 and len(s.support) == 3:
