@@ -490,21 +490,24 @@ class LocalPlanner:
                     f"the {links.describe(c)} comes {-short[c] * 1000:.1f} mm nearer the terrain "
                     f"than its path margin at sample {k} of the path"
                 )
+            bare = None
             if k == 0:  # a measured start may touch already: no deeper
                 bare = links.path_margin(self.terrain, q, swing, scale=0.0)
                 bare_floor = np.minimum(bare - START_SLACK_M, 0.0)
             if short.min() < 0.0:  # inside the margin, as the measured start: not touching
-                bare = links.path_margin(self.terrain, q, swing, scale=0.0)
+                if bare is None:
+                    bare = links.path_margin(self.terrain, q, swing, scale=0.0)
                 c = int(np.argmin(bare - bare_floor))
                 if bare[c] < bare_floor[c]:
                     return f"the {links.describe(c)} touches the terrain at sample {k} of the path"
+        coms = [self.check.com_W(s) for s in path]  # Pinocchio, once per sample
         for k, s in enumerate(path):
             sup = np.flatnonzero(s.in_contact)
             if len(sup) == 4 and k == len(path) - 1 and len(s.support) == 3:
                 sup = np.asarray(s.support)  # a body move's end: the leg is about to lift
             if len(sup) != 3:
                 continue
-            tip = support_margin_m(s.feet_W[sup], self.check.com_W(s))
+            tip = support_margin_m(s.feet_W[sup], coms[k])
             if tip < PATH_BALANCE_MARGIN_M:
                 return (
                     f"the COM is {tip * 1000:.1f} mm inside the support triangle at sample "
@@ -516,7 +519,7 @@ class LocalPlanner:
             normals = self.terrain.normal(s.feet_W)
             res = static_feasibility(
                 s.feet_W,
-                self.check.com_W(s),
+                coms[k],
                 self.robot.total_mass_kg,
                 sup,
                 self.mu,
