@@ -510,7 +510,14 @@ def add_simulate_parser(subparsers) -> Any:
         action="store_true",
         help="execute the plan, correcting each step from the measured state (8.4)",
     )
-    p.add_argument("--time-scale", type=float, default=2.0, help="simulated s per plan s")
+    p.add_argument(
+        "--time-scale", type=float, default=1.0, help="simulated s per plan s (default 1)"
+    )
+    p.add_argument(
+        "--no-feedforward",
+        action="store_true",
+        help="servos track the joint set-points only (no holding-torque feed-forward)",
+    )
     p.add_argument("--timestep", type=float, default=0.001, help="physics step [s]")
     p.add_argument("--noise-mm", type=float, default=0.0, help="position noise sigma [mm]")
     p.add_argument("--noise-deg", type=float, default=0.0, help="angle noise sigma [deg]")
@@ -524,7 +531,9 @@ def add_simulate_parser(subparsers) -> Any:
 def cmd_simulate(args) -> int:
     """Run ``stratawalk simulate``; exit 0 when the run is OK, 1 otherwise."""
     plan = Plan.load(args.plan)
-    settings = SimSettings(time_scale=args.time_scale, timestep_s=args.timestep)
+    settings = SimSettings(
+        time_scale=args.time_scale, timestep_s=args.timestep, feedforward=not args.no_feedforward
+    )
     settings.control_dt_s = max(settings.control_dt_s, settings.timestep_s)
     mode = "feedback" if args.feedback else "correct" if args.correct else "open"
     kwargs = {}

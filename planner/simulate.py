@@ -13,7 +13,9 @@ coefficient is every contact's.
 Execution (this module: open loop; :mod:`planner.execution`: feedback 8.3 and
 precompute-then-correct 8.4) runs in cycles, one per gait step (from a touchdown to the
 next): the joint set-points follow the samples linearly in time, slowed by
-``time_scale`` (the quasi-static assumption wants slow motion), and a :class:`Monitor`
+``time_scale`` (1: the plan's own timing), each servo given as feed-forward the torque
+that holds the planned configuration on its planned feet (``SimSettings.feedforward``),
+and a :class:`Monitor`
 measures what the plan promised: stance feet that do not slip (motion along a leaf), no
 body-terrain contact, the base where the plan puts it. :class:`SimResult` carries the
 metrics and the executed motion as a ``stratawalk.plan/1`` :class:`~planner.plan.Plan`
@@ -43,6 +45,7 @@ from numpy.typing import NDArray
 
 from planner.errors import InputError
 from planner.plan import Keyframe, Plan, Samples, TerrainGrid
+from planner.torques import TorqueCheck, holding_torques_nm
 
 if TYPE_CHECKING:
     from planner.robot import Robot
@@ -60,6 +63,7 @@ __all__ = [
     "Touches",
     "build_mjcf",
     "cycle_starts",
+    "loaded_feet",
     "executed_plan",
     "finish_run",
     "new_run",
@@ -109,9 +113,14 @@ class SimSettings:
     rolling_friction_m : rolling resistance of the feet (0: a rigid sphere rolls freely).
     sliding_min_load_frac : sliding counts while the foot carries at least this fraction
         of the weight (a foot unloaded before its lift-off may drift; it is leaving anyway).
+    feedforward : add to each servo the torque that holds the planned configuration still
+        on its planned feet (:func:`planner.torques.holding_torques_nm`), as a set-point
+        offset tau / kp, so the servo need not sag by tau / kp to produce it. Gains, effort
+        limits and contact are unchanged: the total servo torque still saturates at the
+        effort limit. Off, the servos are pure PD on the joint set-points.
     """
 
-    time_scale: float = 2.0
+    time_scale: float = 1.0
     timestep_s: float = 0.001
     control_dt_s: float = 0.004
     settle_s: float = 1.0
@@ -132,6 +141,7 @@ class SimSettings:
     tip_angle_deg: float = 10.0
     slip_tol_m: float = 0.01
     stop_on_fall: bool = True
+    feedforward: bool = True
 
     def check(self) -> SimSettings:
         """Raise InputError for a non-positive scale or step; return self."""
@@ -384,6 +394,7 @@ class Simulator:
         self.mj = mujoco
         self.robot = robot
         self.settings = (settings or SimSettings()).check()
+        self.terrain = terrain
         self.terrain_model = terrain_model(grid, terrain)
         self.friction = float(friction)
         self.xml = build_mjcf(robot, self.terrain_model, self.friction, self.settings)
@@ -402,6 +413,8 @@ class Simulator:
             [i for i in range(m.ngeom) if m.geom_bodyid[i] == self.base_body], dtype=int
         )
         self.effort = _effort(robot, self.settings)
+        self._setpoint = np.zeros(12)
+        self._holding: TorqueCheck | None = None
         self.n_sub = max(1, int(round(self.settings.control_dt_s / self.settings.timestep_s)))
         self.history: list[tuple[float, _Array, NDArray[np.bool_]]] = []
         self.history_s = 0.0
@@ -447,7 +460,7 @@ class Simulator:
         qpos[3:7] = [q[6], q[3], q[4], q[5]]
         qpos[self._jadr] = q[self._pin_idx]
         self.data.qvel[:] = 0.0
-        self.data.ctrl[:] = q[self._pin_idx]
+        self.set_targets(q[self._pin_idx])
         self.mj.mj_forward(self.model, self.data)
 
     def q(self) -> _Array:
@@ -475,13 +488,34 @@ class Simulator:
         """(4, 3) foot sphere centres [m], world."""
         return self.data.geom_xpos[self.foot_geoms].copy()
 
-    def set_targets(self, joints: Any) -> None:
-        """Servo set-points: (12,) or (4, 3) joint angles [rad], robot order."""
-        self.data.ctrl[:] = np.asarray(joints, float).ravel()
+    def set_targets(self, joints: Any, torque_ff_nm: Any = None) -> None:
+        """Servo set-points: (12,) or (4, 3) joint angles [rad], robot order.
+
+        ``torque_ff_nm`` (12,): feed-forward torques, applied as the set-point offset
+        tau / kp (the servo's torque at the set-point is then tau; it still saturates).
+        """
+        self._setpoint = np.asarray(joints, float).ravel().copy()
+        ctrl = self._setpoint
+        if torque_ff_nm is not None:
+            ctrl = ctrl + np.asarray(torque_ff_nm, float).ravel() / self.settings.kp_nm_per_rad
+        self.data.ctrl[:] = ctrl
 
     def targets(self) -> _Array:
-        """(12,) current servo set-points."""
-        return self.data.ctrl.copy()
+        """(12,) current joint set-points (without the feed-forward offset)."""
+        return self._setpoint.copy()
+
+    def holding_torques_nm(self, q: Any, contact: Any) -> _Array:
+        """(N, 12) feed-forward torques for configurations q (N, 19) on contact (N, 4) feet.
+
+        Zeros when ``settings.feedforward`` is off.
+        """
+        q = np.atleast_2d(np.asarray(q, float))
+        if not self.settings.feedforward:
+            return np.zeros((len(q), 12))
+        if self._holding is None:
+            self._holding = TorqueCheck(self.robot)
+        c = np.atleast_2d(np.asarray(contact, bool))
+        return holding_torques_nm(self._holding, q, c, self.friction, self.terrain)
 
     def saturated(self) -> bool:
         """Whether any servo is at its torque limit."""
@@ -539,6 +573,8 @@ class Simulator:
     def settle(self, q0: Any, duration_s: float) -> None:
         """Start at ``q0`` (2 mm up) holding its joints, and let the robot settle."""
         self.set_q(q0, lift_m=0.002)
+        q0 = np.asarray(q0, float)
+        self.set_targets(q0[self._pin_idx], self.holding_torques_nm(q0, np.ones(4, bool))[0])
         end = self.time + duration_s
         while self.time < end - 1e-9:
             self.tick()
@@ -663,6 +699,7 @@ class Monitor:
         self.t: list[float] = []
         self.q: list[_Array] = []
         self.contact: list[NDArray[np.bool_]] = []
+        self.torque_ff: list[_Array] = []
         self._anchor: list[_Array | None] = [None] * 4
         self._sliding = np.zeros((4, 3))  # integral of the contact point's tangential velocity
         weight = sim.robot.total_mass_kg * GRAVITY
@@ -675,15 +712,35 @@ class Monitor:
         self._next_rec = -math.inf
 
     # ---- reference --------------------------------------------------------------------
-    def extend(self, t: _Array, q: _Array, contact: NDArray[np.bool_]) -> None:
-        """Append reference samples (simulator times, strictly after the last one)."""
-        for ti, qi, ci in zip(t, q, contact, strict=True):
+    def extend(
+        self, t: _Array, q: _Array, contact: NDArray[np.bool_], torque_ff: _Array | None = None
+    ) -> None:
+        """Append reference samples (simulator times, strictly after the last one).
+
+        ``torque_ff`` (N, 12): the servos' feed-forward torques at the samples (zeros if None).
+        """
+        if torque_ff is None:
+            torque_ff = np.zeros((len(t), 12))
+        for ti, qi, ci, fi in zip(t, q, contact, torque_ff, strict=True):
             if self.t and ti <= self.t[-1] + 1e-12:
                 self.q[-1], self.contact[-1] = np.asarray(qi, float), np.asarray(ci, bool)
+                self.torque_ff[-1] = np.asarray(fi, float)
                 continue
             self.t.append(float(ti))
             self.q.append(np.asarray(qi, float))
             self.contact.append(np.asarray(ci, bool))
+            self.torque_ff.append(np.asarray(fi, float))
+
+    def feedforward_at(self, t: float) -> _Array:
+        """(12,) feed-forward torques [N m] at simulator time ``t`` (linear between samples)."""
+        ts = self.t
+        k = int(np.searchsorted(ts, t, side="right")) - 1
+        if k < 0:
+            return self.torque_ff[0]
+        if k >= len(ts) - 1:
+            return self.torque_ff[-1]
+        u = (t - ts[k]) / (ts[k + 1] - ts[k])
+        return (1.0 - u) * self.torque_ff[k] + u * self.torque_ff[k + 1]
 
     def reference_at(self, t: float) -> tuple[_Array, _Array, NDArray, NDArray]:
         """(set-point joints (12,), base q (7,), planned stance (4,), planned swing (4,))."""
@@ -830,6 +887,7 @@ class Execution:
         self.sim = sim
         self.monitor = monitor
         self.clock = sim.time
+        self._last_contact: NDArray[np.bool_] | None = None
 
     @property
     def stopped(self) -> bool:
@@ -842,7 +900,10 @@ class Execution:
         if len(times) == 0:
             return not self.stopped
         t_sim = self.clock + self.sim.settings.time_scale * (times - times[0])
-        self.monitor.extend(t_sim, np.asarray(q, float), np.asarray(contact, bool))
+        q, contact = np.asarray(q, float), np.asarray(contact, bool)
+        loaded = loaded_feet(contact, self._last_contact)
+        self._last_contact = contact[-1].copy()
+        self.monitor.extend(t_sim, q, contact, self.sim.holding_torques_nm(q, loaded))
         end = float(t_sim[-1])
         return self._run_until(end)
 
@@ -855,11 +916,27 @@ class Execution:
         half = 0.5 * sim.settings.control_dt_s
         while sim.time < end - half and not self.stopped:
             joints, _, _, _ = mon.reference_at(sim.time + half)
-            sim.set_targets(joints)
+            sim.set_targets(joints, mon.feedforward_at(sim.time + half))
             sim.tick()
             mon.update()
         self.clock = max(self.clock, end)
         return not self.stopped
+
+
+def loaded_feet(contact: NDArray[np.bool_], before: NDArray[np.bool_] | None = None) -> NDArray:
+    """(N, 4) feet that carry load at each sample: in contact there and at both neighbours.
+
+    A foot that lifts after sample k is unloaded at k (its load moves to the other feet
+    over the interval before lift-off); a foot that lands at k is loaded from k + 1 on.
+    ``before``: the contact flags of the sample preceding the first (None: unknown).
+    """
+    c = np.asarray(contact, bool)
+    out = c.copy()
+    out[1:] &= c[:-1]
+    out[:-1] &= c[1:]
+    if before is not None and len(c):
+        out[0] &= np.asarray(before, bool)
+    return out
 
 
 def cycle_starts(contact: NDArray[np.bool_]) -> list[int]:

@@ -37,11 +37,13 @@ from planner.statics import _tangent_bases
 
 if TYPE_CHECKING:
     from planner.robot import Robot
+    from planner.terrain import Terrain
 
-__all__ = ["TorqueCheck", "TorqueFeasibility", "joint_efforts_nm"]
+__all__ = ["TorqueCheck", "TorqueFeasibility", "holding_torques_nm", "joint_efforts_nm"]
 
 _Array = NDArray[np.float64]
 _SOLVED = ("Solved", "AlmostSolved")
+_E_Z = np.array([0.0, 0.0, 1.0])
 
 
 @dataclass
@@ -89,10 +91,15 @@ class TorqueCheck:
         )
         self.effort = joint_efforts_nm(robot)
 
-    def solve(self, q: _Array, support, mu: float, normals_W: _Array) -> TorqueFeasibility:
+    def solve(
+        self, q: _Array, support, mu: float, normals_W: _Array, least_squares: bool = False
+    ) -> TorqueFeasibility:
         """Torque feasibility at Pinocchio ``q`` on the feet ``support`` (0-based legs).
 
         ``normals_W`` (4, 3): terrain normals at the contacts; ``mu``: friction coefficient.
+        ``least_squares``: minimise sum_j tau_j^2 instead (the forces equal stiff servos
+        settle into, with no internal forces beyond what balance needs); ``ratio`` is then
+        that distribution's, not the least achievable.
         """
         model, data = self.model, self.data
         q = np.asarray(q, float)
@@ -143,13 +150,21 @@ class TorqueCheck:
         b.append(np.zeros(3 * k))
         cones += [clarabel.SecondOrderConeT(3) for _ in range(k)]
         cost = np.zeros(nv)
-        cost[-1] = 1.0
+        hess = sp.csc_matrix((nv, nv))
+        if least_squares:  # |g_a - A f|^2 = f'A'A f - 2 g_a'A f + const; s stays feasible
+            a = jt[self.v_idx]
+            h = np.zeros((nv, nv))
+            h[: 3 * k, : 3 * k] = 2.0 * a.T @ a
+            hess = sp.triu(sp.csc_matrix(h), format="csc")
+            cost[: 3 * k] = -2.0 * a.T @ g[self.v_idx]
+            cost[-1] = 1e-6
+        else:
+            cost[-1] = 1.0
         settings = clarabel.DefaultSettings()
         settings.verbose = False
         solver = clarabel.DefaultSolver(
-            sp.csc_matrix((nv, nv)), cost, sp.csc_matrix(np.vstack(rows)), np.concatenate(b),
-            cones, settings,
-        )  # fmt: skip
+            hess, cost, sp.csc_matrix(np.vstack(rows)), np.concatenate(b), cones, settings
+        )
         res = solver.solve()
         status = str(res.status)
         forces = np.zeros((4, 3))
@@ -162,3 +177,32 @@ class TorqueCheck:
             return TorqueFeasibility(float(ratios[worst]), tau, forces, worst, status)
         ratio = math.inf if "Infeasible" in status else math.nan
         return TorqueFeasibility(ratio, np.full(12, np.nan), forces, -1, status)
+
+
+def holding_torques_nm(
+    check: TorqueCheck, q: _Array, contact: NDArray[np.bool_], mu: float, terrain: Terrain | None
+) -> _Array:
+    """(N, 12) joint torques [N m] that hold each of ``q`` (N, 19) still on its ``contact`` feet.
+
+    Per sample, the least-squares torques of :meth:`TorqueCheck.solve` (balancing forces
+    in the friction cones; normals from ``terrain`` at the foot centres, vertical without
+    a terrain). With uniform servo stiffness these are the forces stiff servos settle
+    into (least complementary energy), so no internal forces push the feet. A sample
+    where no admissible forces balance the robot keeps the previous sample's torques
+    (zeros before the first): these are feed-forward torques for the servos, not a check.
+    """
+    q = np.asarray(q, float)
+    contact = np.asarray(contact, bool)
+    model, data = check.model, check.data
+    out = np.zeros((len(q), 12))
+    last = np.zeros(12)
+    for k, (qk, ck) in enumerate(zip(q, contact, strict=True)):
+        if ck.any():
+            pin.framesForwardKinematics(model, data, qk)
+            centres = np.array([data.oMf[f].translation for f in check.foot_ids])
+            normals = terrain.normal(centres) if terrain is not None else np.tile(_E_Z, (4, 1))
+            res = check.solve(qk, np.flatnonzero(ck), mu, normals, least_squares=True)
+            if np.all(np.isfinite(res.torques_nm)):
+                last = res.torques_nm
+        out[k] = last
+    return out

@@ -16,6 +16,7 @@ from planner.simulate import (
     SimSettings,
     Simulator,
     cycle_starts,
+    loaded_feet,
     run_open_loop,
     terrain_model,
 )
@@ -82,6 +83,36 @@ def test_standing_robot_carries_its_weight_without_creeping(short_plan):
     # the servos hold the planned pose to a few millimetres
     assert np.linalg.norm(sim.q()[:3] - plan.samples.q[0, :3]) < 0.005
     assert np.abs(sim.joints() - sim.targets()).max() < np.radians(3)
+
+
+def test_feedforward_removes_the_servo_sag(short_plan):
+    """Standing, PD servos sag by tau / kp; the holding-torque feed-forward removes most of it."""
+    plan = short_plan
+    q0 = plan.samples.q[0]
+    sag = {}
+    for ff in (False, True):
+        sim = Simulator(
+            plan.load_robot(), plan.terrain_grid, plan.friction, plan.load_terrain(),
+            SimSettings(feedforward=ff),
+        )  # fmt: skip
+        sim.settle(q0, 1.0)
+        sag[ff] = np.abs(sim.joints() - q0[sim._pin_idx]).max()
+        tau = sim.holding_torques_nm(q0, np.ones(4, bool))[0]
+        assert np.any(tau != 0.0) == ff
+    # a hip pitch carries ~0.5 N m: ~1.4 degrees of sag at kp = 20 N m/rad
+    assert sag[False] > np.radians(0.5)
+    assert sag[True] < 0.3 * sag[False], sag
+
+
+def test_feet_unload_before_lift_off_and_load_after_touch_down():
+    c = np.ones((6, 4), bool)
+    c[2:4, 1] = False  # FR lifts after sample 1 and lands at sample 4
+    out = loaded_feet(c)
+    assert out[:, [0, 2, 3]].all()
+    assert out[:, 1].tolist() == [True, False, False, False, False, True]
+    # a segment that starts at a touch-down sample knows the sample before it
+    before = np.array([True, False, True, True])
+    assert loaded_feet(c[4:], before)[:, 1].tolist() == [False, True]
 
 
 def test_open_loop_short_flat_walk_reaches_without_falling(short_plan, open_loop):

@@ -87,3 +87,41 @@ def test_no_balance_is_infinite(littledog):
     # three feet far to one side of the COM cannot hold it: no admissible forces at all
     res = tc.solve(q, [0, 1, 2], 0.01, np.tile([1.0, 0.0, 0.0], (4, 1)))
     assert not res.feasible and res.ratio == np.inf
+
+
+def test_least_squares_torques_are_the_equality_constrained_optimum(flat_plan, littledog):
+    """With wide cones, min |tau|^2 subject to balance has a closed form (KKT, numpy)."""
+    tc = TorqueCheck(littledog)
+    up = np.tile([0.0, 0.0, 1.0], (4, 1))
+    model = littledog.model
+    v = [model.joints[model.getJointId(n)].idx_v for n in littledog.joint_names]
+    base = [i for i in range(model.nv) if i not in v]
+    for k in (0, len(flat_plan.samples) // 2):  # a four-leg and a three-leg stance
+        q = flat_plan.samples.q[k]
+        sup = np.flatnonzero(flat_plan.samples.contact[k])
+        res = tc.solve(q, sup, 5.0, up, least_squares=True)
+        tau_rnea = _rnea_torques(littledog, q, res.forces_W)
+        assert np.abs(tau_rnea[:6]).max() < 1e-6  # the forces balance the robot
+        np.testing.assert_allclose(tau_rnea[v], res.torques_nm, atol=1e-6)
+        # reference: tau = g_a - A f, min |tau|^2 s.t. B f = g_b, by the KKT system
+        data = model.createData()
+        g = pin.computeGeneralizedGravity(model, data, q)
+        pin.computeJointJacobians(model, data, q)
+        pin.updateFramePlacements(model, data)
+        cols = []
+        for i in sup:
+            J = pin.getFrameJacobian(
+                model, data, model.getFrameId(littledog.foot_frames[i]), pin.LOCAL_WORLD_ALIGNED
+            )
+            d = np.array([0.0, 0.0, -littledog.foot_radius_m])
+            hat = np.array([[0, -d[2], d[1]], [d[2], 0, -d[0]], [-d[1], d[0], 0]])
+            cols.append((J[:3] - hat @ J[3:]).T)
+        jt = np.hstack(cols)
+        a, b = jt[v], jt[base]
+        n = a.shape[1]
+        kkt = np.block([[2 * a.T @ a, b.T], [b, np.zeros((len(base), len(base)))]])
+        rhs = np.concatenate([2 * a.T @ g[v], g[base]])
+        f = np.linalg.lstsq(kkt, rhs, rcond=None)[0][:n]
+        np.testing.assert_allclose(res.torques_nm, g[v] - a @ f, atol=2e-5)
+        # it is a balancing distribution, so it needs at least the least achievable ratio
+        assert res.ratio >= tc.solve(q, sup, 5.0, up).ratio - 1e-7
