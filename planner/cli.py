@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import math
+import re
 import sys
 
 import numpy as np
 
-from planner.errors import PlannerError
+from planner.errors import InputError, PlannerError
 
 
 def robot_summary(robot) -> str:
@@ -77,25 +79,68 @@ def _cmd_check(args) -> int:
 
 
 def _parse_xy(text: str, field: str) -> tuple[float, float]:
-    from planner.errors import InputError
-
     try:
         x, y = (float(v) for v in text.split(","))
     except ValueError:
         raise InputError(f"--{field}: expected X,Y in metres (e.g. 2.2,0), got '{text}'") from None
+    if not (math.isfinite(x) and math.isfinite(y)):
+        raise InputError(f"--{field}: expected finite X,Y in metres, got '{text}'")
     return x, y
+
+
+_XY_OPTIONS = ("--goal", "--start")
+
+
+def _join_negative_xy(argv: list[str]) -> list[str]:
+    """``--goal -1.0,0`` as ``--goal=-1.0,0`` (argparse takes ``-1.0,0`` for an option)."""
+    out, i = [], 0
+    while i < len(argv):
+        a = argv[i]
+        if a in _XY_OPTIONS and i + 1 < len(argv) and re.match(r"^-\.?\d", argv[i + 1]):
+            out.append(f"{a}={argv[i + 1]}")
+            i += 2
+            continue
+        out.append(a)
+        i += 1
+    return out
+
+
+def _user_settings(args):
+    """The plan command's settings: --config file, then the options (planner.settings)."""
+    from planner.settings import SETTINGS, load_config, resolve
+
+    config = load_config(args.config) if args.config else {}
+    options = {st.name: getattr(args, _dest(st)) for st in SETTINGS}
+    return resolve(config, options)
+
+
+def _dest(setting) -> str:
+    return setting.option.lstrip("-").replace("-", "_")
 
 
 def _cmd_plan(args) -> int:
     import time
+    from dataclasses import replace
 
-    from planner.local.base import LocalSettings
-    from planner.problems import ThetaOptions
-    from planner.walk import plan_walk
+    from planner.robot import load_robot
+    from planner.settings import effective
+    from planner.terrain import load_terrain
+    from planner.walk import PLANNERS, check_endpoints, plan_walk
 
-    settings = LocalSettings(time_budget_s=args.time_budget, theta=ThetaOptions(jit=args.jit))
+    user = _user_settings(args)
+    settings = replace(user.local, theta=replace(user.local.theta, jit=args.jit))
+    robot, terrain = load_robot(args.robot), load_terrain(args.terrain)
+    if args.print_config:
+        local = PLANNERS[args.planner](robot, terrain, mu=user.mu, settings=settings)
+        for name, value in effective(local, user.seed).items():
+            shown = ",".join(value) if isinstance(value, list) else f"{value:g}"
+            print(f"{name}: {shown}")
+        return 0
+    if args.goal is None:
+        raise InputError("--goal: required; give X,Y in metres (e.g. --goal 2.2,0)")
     goal = _parse_xy(args.goal, "goal")
     start = _parse_xy(args.start, "start")
+    check_endpoints(robot, terrain, start, goal, ("--start", "--goal"))
     t0 = time.perf_counter()
     total = float(np.hypot(goal[0] - start[0], goal[1] - start[1]))
 
@@ -112,13 +157,13 @@ def _cmd_plan(args) -> int:
     if getattr(args, "global_plan", False):  # section 9: CMA-ES over tau, planner/global_plan.py
         from planner.global_plan import GlobalSettings, plan_global_walk, print_progress
 
-        gs = GlobalSettings(terms=args.terms, max_generations=args.generations)
+        gs = GlobalSettings(terms=args.terms, max_generations=args.generations, seed=user.seed)
         plan, report = plan_global_walk(
-            args.robot, args.terrain, goal, start, args.planner, settings, gs, print_progress
+            args.robot, terrain, goal, start, args.planner, settings, gs, print_progress, user.mu
         )
     else:
         plan, report = plan_walk(
-            args.robot, args.terrain, goal, start, args.planner, settings, progress=progress
+            robot, terrain, goal, start, args.planner, settings, progress=progress, mu=user.mu
         )
     print(file=sys.stderr)
     path = plan.save(args.out)
@@ -175,7 +220,7 @@ def build_parser() -> argparse.ArgumentParser:
     pl = sub.add_parser("plan", help="plan a walk and write a stratawalk.plan/1 file")
     pl.add_argument("--robot", default="littledog")
     pl.add_argument("--terrain", required=True, help="terrain name or YAML path")
-    pl.add_argument("--goal", required=True, help="X,Y [m]")
+    pl.add_argument("--goal", help="X,Y [m] (required unless --print-config)")
     pl.add_argument("--start", default="0.2,0", help="X,Y [m] (default 0.2,0)")
     pl.add_argument(
         "--planner",
@@ -183,7 +228,14 @@ def build_parser() -> argparse.ArgumentParser:
         choices=["soft", "hard", "recursive"],
         help="soft: 8.2 gait queue (default); hard: 8.1 search Omega; recursive: 8.5",
     )
-    pl.add_argument("--time-budget", type=float, default=120.0, help="[s]")
+    from planner.settings import SETTINGS
+
+    for st in SETTINGS:
+        pl.add_argument(st.option, dest=_dest(st), help=f"{st.help}; YAML name {st.name}")
+    pl.add_argument("--config", help="YAML file of settings (names as in --print-config)")
+    pl.add_argument(
+        "--print-config", action="store_true", help="print the settings in force and exit"
+    )
     pl.add_argument("--out", default="plan.json")
     pl.add_argument(
         "--jit",
@@ -230,6 +282,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point; planner errors become a one-line message and exit status 2."""
+    argv = _join_negative_xy(list(sys.argv[1:] if argv is None else argv))
     args = build_parser().parse_args(argv)
     try:
         return int(args.func(args) or 0)

@@ -56,6 +56,7 @@ import numpy as np
 
 from planner.errors import InputError, NoSolutionFound, PlannerError
 from planner.local.base import LocalSettings
+from planner.settings import effective
 from planner.trajectory import Trajectory
 from planner.walk import assemble_plan
 
@@ -271,6 +272,7 @@ class _Problem:
     start_xy: tuple[float, float]
     goal_xy: tuple[float, float]
     weights: CostWeights
+    seed: int = 1
 
 
 def _init_worker(problem: _Problem) -> None:
@@ -329,7 +331,11 @@ def _evaluate(a_m: list[float], generation: int = 0):
             **metrics,
         )
         return ev, None
-    extra = {"planner": pb.planner, "tau": {"kind": tau.kind, "coefficients_m": list(a_m)}}
+    extra = {
+        "planner": pb.planner,
+        "tau": {"kind": tau.kind, "coefficients_m": list(a_m)},
+        "settings": effective(local, pb.seed),
+    }
     plan, report = assemble_plan(robot, terrain, local.mu, pb.start_xy, pb.goal_xy, result, extra)
     reached = bool(plan.outcome["reached_goal"])
     margin = stability_margin_m(robot, local.check, result.keyframes)
@@ -366,6 +372,7 @@ def plan_global_walk(
     settings: LocalSettings | None = None,
     global_settings: GlobalSettings | None = None,
     progress=None,
+    mu: float | None = None,
 ):
     """Section 9: CMA-ES over the sine coefficients of tau; returns (plan, report).
 
@@ -378,9 +385,10 @@ def plan_global_walk(
     """
     import cma
 
+    from planner.robot import load_robot
     from planner.terrain import Terrain, load_terrain
     from planner.validate import check_plan
-    from planner.walk import PLANNERS
+    from planner.walk import PLANNERS, check_endpoints
 
     gs = global_settings or GlobalSettings()
     gs.check()
@@ -397,8 +405,10 @@ def plan_global_walk(
     start = (float(start_xy[0]), float(start_xy[1]))
     goal = (float(goal_xy[0]), float(goal_xy[1]))
     lateral_coefficients(np.zeros(1), start, goal)  # start != goal
+    check_endpoints(load_robot(robot), t, start, goal)
+    spec = t.spec if mu is None else dict(t.spec, friction=float(mu))  # workers read the spec
     problem = _Problem(
-        robot, t.spec, base, planner, settings or LocalSettings(), start, goal, gs.weights
+        robot, spec, base, planner, settings or LocalSettings(), start, goal, gs.weights, gs.seed
     )
     workers = gs.workers or os.cpu_count() or 1
     t_begin = time.perf_counter()

@@ -8,6 +8,8 @@ validator finds nothing wrong with it.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from planner.local.base import LocalPlan, LocalSettings
@@ -16,6 +18,7 @@ from planner.local.recursive import RecursivePlanner
 from planner.local.soft import SoftPlanner
 from planner.plan import Plan
 from planner.robot import load_robot
+from planner.settings import effective
 from planner.terrain import load_terrain
 from planner.validate import check_plan
 
@@ -30,11 +33,13 @@ def plan_walk(
     planner: str = "soft",
     settings: LocalSettings | None = None,
     progress=None,
+    mu: float | None = None,
 ) -> tuple[Plan, object]:
     """Plan, assemble and validate a walk; returns (plan, validation report).
 
-    ``robot`` and ``terrain`` may be names/paths or loaded objects. Ctrl-C or the time
-    budget of ``settings`` stops planning; the plan so far is still returned.
+    ``robot`` and ``terrain`` may be names/paths or loaded objects; ``mu`` overrides the
+    terrain's friction. Ctrl-C or the time budget of ``settings`` stops planning; the plan
+    so far is still returned. The plan records the settings in force (``stats.settings``).
     """
     if planner not in PLANNERS:
         from planner.errors import InputError
@@ -42,9 +47,39 @@ def plan_walk(
         raise InputError(f"planner: unknown '{planner}'; available: {', '.join(PLANNERS)}")
     robot = load_robot(robot) if isinstance(robot, str) else robot
     terrain = load_terrain(terrain) if isinstance(terrain, str) else terrain
-    local = PLANNERS[planner](robot, terrain, settings=settings)
+    check_endpoints(robot, terrain, start_xy, goal_xy)
+    local = PLANNERS[planner](robot, terrain, mu=mu, settings=settings)
     result = local.plan(start_xy, goal_xy, progress=progress)
-    return assemble_plan(robot, terrain, local.mu, start_xy, goal_xy, result, {"planner": planner})
+    extra = {"planner": planner, "settings": effective(local)}
+    return assemble_plan(robot, terrain, local.mu, start_xy, goal_xy, result, extra)
+
+
+def check_endpoints(robot, terrain, start_xy, goal_xy, names=("start", "goal")) -> None:
+    """InputError unless start and goal lie on the terrain's declared extent.
+
+    The robot's hips and feet at zero angles must fit inside ``terrain.bounds`` (x_min ..
+    x_min + length, y_min .. y_max) around each point.
+    """
+    from planner.errors import InputError
+
+    x0, x1, y0, y1 = terrain.bounds
+    hips = np.array([p for leg in robot.legs for p in (leg.points_B[0], leg.foot_B0)])
+    mx, my = float(np.abs(hips[:, 0]).max()), float(np.abs(hips[:, 1]).max())
+    extent = (
+        f"x {x0:g}..{x1:g}, y {y0:g}..{y1:g} m (the robot needs {mx:.2f} m in x and "
+        f"{my:.2f} m in y around it)"
+    )
+    if x1 - x0 <= 2 * mx or y1 - y0 <= 2 * my:
+        raise InputError(f"terrain {terrain.name}: too small for the robot: {extent}")
+    for name, xy in zip(names, (start_xy, goal_xy), strict=True):
+        x, y = float(xy[0]), float(xy[1])
+        if not (math.isfinite(x) and math.isfinite(y)):
+            raise InputError(f"{name}: {x:g},{y:g} is not a finite point; give X,Y in metres")
+        if not (x0 + mx <= x <= x1 - mx and y0 + my <= y <= y1 - my):
+            raise InputError(
+                f"{name}: {x:g},{y:g} is off terrain {terrain.name}: {extent}; choose a "
+                "point inside"
+            )
 
 
 def assemble_plan(robot, terrain, mu, start_xy, goal_xy, result: LocalPlan, stats: dict):
