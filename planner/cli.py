@@ -122,6 +122,7 @@ def _cmd_plan(args) -> int:
     import time
     from dataclasses import replace
 
+    from planner.plan import check_output_path
     from planner.robot import load_robot
     from planner.settings import effective
     from planner.terrain import load_terrain
@@ -141,6 +142,7 @@ def _cmd_plan(args) -> int:
     goal = _parse_xy(args.goal, "goal")
     start = _parse_xy(args.start, "start")
     check_endpoints(robot, terrain, start, goal, ("--start", "--goal"))
+    check_output_path(args.out)
     t0 = time.perf_counter()
     total = float(np.hypot(goal[0] - start[0], goal[1] - start[1]))
 
@@ -277,6 +279,9 @@ def build_parser() -> argparse.ArgumentParser:
     from planner.course_gen import add_generate_parser
 
     add_generate_parser(sub)
+    from planner.export import add_export_parser
+
+    add_export_parser(sub)
     return p
 
 

@@ -524,6 +524,10 @@ def add_simulate_parser(subparsers) -> Any:
     p.add_argument("--latency", type=float, default=0.0, help="measurement latency [s]")
     p.add_argument("--seed", type=int, default=0, help="noise seed")
     p.add_argument("--out", help="write the executed motion here (stratawalk.plan/1)")
+    p.add_argument(
+        "--trajectory",
+        help="execute this `stratawalk export` file (CSV or npz) of the plan, open loop",
+    )
     p.set_defaults(func=cmd_simulate)
     return p
 
@@ -544,7 +548,15 @@ def cmd_simulate(args) -> int:
             "latency_s": args.latency,
             "seed": args.seed,
         }
-    res = simulate_plan(plan, mode, settings, **kwargs)
+    if args.trajectory:
+        from planner.export import load_trajectory, plan_from_trajectory
+
+        if mode != "open":
+            raise InputError("--trajectory: executes open loop; drop --feedback/--correct")
+        traj = load_trajectory(args.trajectory)
+        res = run_open_loop(plan_from_trajectory(plan, traj), settings, traj.torque_ff)
+    else:
+        res = simulate_plan(plan, mode, settings, **kwargs)
     print(res.metrics.summary())
     if args.out:
         path = res.executed.save(args.out)

@@ -278,6 +278,17 @@ class Samples:
         }
 
 
+def check_output_path(path: str | Path) -> Path:
+    """``path`` as a Path; InputError if it is a folder or under a file (before any work)."""
+    path = Path(path)
+    if path.is_dir():
+        raise InputError(f"--out {path}: is a folder; give a file name like {path / 'plan.json'}")
+    for parent in path.parents:
+        if parent.exists() and not parent.is_dir():
+            raise InputError(f"--out {path}: {parent} is a file, not a folder; choose another path")
+    return path
+
+
 # ------------------------------------------------------------------------------ the plan
 @dataclass(eq=False)
 class Plan:
@@ -546,11 +557,15 @@ class Plan:
 
     def save(self, path: str | Path) -> Path:
         """Write the plan as JSON (floats at full precision), atomically (temp file + rename)."""
-        path = Path(path)
+        path = check_output_path(path)
         text = json.dumps(self.to_dict(), allow_nan=False, separators=(",", ":"))
         folder = path.parent if str(path.parent) else Path(".")
+        folder.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
         try:
+            umask = os.umask(0)
+            os.umask(umask)
+            os.chmod(tmp, 0o666 & ~umask)  # as open() would make it, not mkstemp's 0600
             with os.fdopen(fd, "w", encoding="utf-8") as fh:
                 fh.write(text)
                 fh.write("\n")
@@ -584,6 +599,12 @@ class Plan:
         return cls.from_dict(data, source=source)
 
     # ---- rebuilding -------------------------------------------------------------------
+    def export(self, rate_hz: float = 500.0):
+        """The plan at a fixed rate for a controller (:func:`planner.export.export_plan`)."""
+        from planner.export import export_plan
+
+        return export_plan(self, rate_hz)
+
     def load_robot(self) -> Robot:
         """The plan's robot: ``robot.urdf`` if that file exists, else ``robot.name``."""
         if self._robot_cache is None:

@@ -894,8 +894,11 @@ class Execution:
         """A fall ends the run (when ``stop_on_fall``)."""
         return self.monitor.metrics.fell and self.sim.settings.stop_on_fall
 
-    def follow(self, times: Any, q: Any, contact: Any) -> bool:
-        """Track samples (plan times (N,), Pinocchio q (N, 19), contact (N, 4)); False on a fall."""
+    def follow(self, times: Any, q: Any, contact: Any, torque_ff: Any = None) -> bool:
+        """Track samples (plan times (N,), Pinocchio q (N, 19), contact (N, 4)); False on a fall.
+
+        ``torque_ff`` (N, 12): the servos' feed-forward torques (computed when None).
+        """
         times = np.asarray(times, float)
         if len(times) == 0:
             return not self.stopped
@@ -903,7 +906,9 @@ class Execution:
         q, contact = np.asarray(q, float), np.asarray(contact, bool)
         loaded = loaded_feet(contact, self._last_contact)
         self._last_contact = contact[-1].copy()
-        self.monitor.extend(t_sim, q, contact, self.sim.holding_torques_nm(q, loaded))
+        if torque_ff is None or not self.sim.settings.feedforward:
+            torque_ff = self.sim.holding_torques_nm(q, loaded)
+        self.monitor.extend(t_sim, q, contact, np.asarray(torque_ff, float))
         end = float(t_sim[-1])
         return self._run_until(end)
 
@@ -1037,8 +1042,14 @@ def executed_plan(plan: Plan, mon: Monitor, settings: SimSettings, extra: dict |
     )
 
 
-def run_open_loop(plan: Plan, settings: SimSettings | None = None) -> SimResult:
-    """Execute ``plan`` open loop: joint set-points from the samples, slowed by time_scale."""
+def run_open_loop(
+    plan: Plan, settings: SimSettings | None = None, torque_ff: _Array | None = None
+) -> SimResult:
+    """Execute ``plan`` open loop: joint set-points from the samples, slowed by time_scale.
+
+    ``torque_ff`` (N, 12): feed-forward torques at the samples (e.g. an exported
+    trajectory's); computed from the plan when None.
+    """
     wall0 = _time.perf_counter()
     sim, ex = new_run(plan, settings, "open loop")
     t0 = sim.time
@@ -1047,6 +1058,7 @@ def run_open_loop(plan: Plan, settings: SimSettings | None = None) -> SimResult:
     for a, b in zip(starts[:-1], starts[1:], strict=True):
         ex.monitor.keyframe(0)
         ex.monitor.metrics.cycles += 1
-        if not ex.follow(s.time[a : b + 1], s.q[a : b + 1], s.contact[a : b + 1]):
+        ff = None if torque_ff is None else torque_ff[a : b + 1]
+        if not ex.follow(s.time[a : b + 1], s.q[a : b + 1], s.contact[a : b + 1], ff):
             break
     return finish_run(plan, ex, wall0, t0)
