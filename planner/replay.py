@@ -504,6 +504,7 @@ def build_scene(
     speed: float = 4.0,
     loop: bool = True,
     geometry: str = "visual",
+    follow: bool = True,
 ) -> Scene:
     """Record the meshcat scene and animation of ``plan`` (see the module docstring).
 
@@ -511,6 +512,8 @@ def build_scene(
     walk is slow); the viewer's ``timeScale`` control changes it further. ``geometry``
     draws the robot's URDF ``visual`` geometry (meshes for most robots) or its lighter
     ``collision`` geometry (often primitives; Collada meshes can weigh tens of MB).
+    ``follow``: the view follows the body (the world is animated under a fixed camera, so
+    the robot keeps its size on a long walk); False frames the whole walk once.
     """
     if not (speed > 0 and math.isfinite(speed)):
         raise InputError(f"--speed: expected a number > 0, got {speed}")
@@ -532,11 +535,17 @@ def build_scene(
     shift[:3, 3] = -centre
     root.set_transform(shift)
     span = float(max(hi[0] - lo[0], hi[1] - lo[1], 0.3))
+    if follow:
+        span = min(span, 0.3 + 4.0 * height)  # a window around the robot, not the whole walk
     d = 0.25 + 1.2 * height + 0.45 * span  # the camera's distance scales with the robot and walk
     vis["/Cameras/default/rotated/<object>"].set_property("position", [0.35 * d, 0.55 * d, d])
 
     anim = _meshcat().animation.Animation(default_framerate=speed)
     tr = _Tracks(anim, root, s.time)
+    if follow:  # the world moves so that the base (xy) stays where the view centre is
+        for k in range(len(s)):
+            p = [-float(s.base_W[k, 0]), -float(s.base_W[k, 1]), -float(centre[2])]
+            tr.at(k).set_property("position", "vector3", p)
     mag = np.linalg.norm(s.forces_W, axis=-1)
     fmax = float(np.max(mag)) if np.max(mag) > 0 else 1.0
     m_per_N = _nice_scale(0.7 * height / fmax)  # the longest arrow ~ 0.7 standing heights
@@ -554,6 +563,7 @@ def build_scene(
         "robot": plan.robot["name"],
         "terrain": plan.terrain.get("name", plan.terrain.get("kind", "")),
         "speed": speed,
+        "follow": bool(follow),
         "m_per_N": m_per_N,
         "arrow_head_m": head,
         "time": [round(float(t), 4) for t in s.time],
@@ -854,6 +864,11 @@ def add_replay_parser(subparsers) -> argparse.ArgumentParser:
         "--seconds", type=float, default=None, help="stop serving after this long (default: Ctrl-C)"
     )
     p.add_argument("--open", action="store_true", help="open the page in a web browser")
+    p.add_argument(
+        "--fixed-camera",
+        action="store_true",
+        help="frame the whole walk once (default: the view follows the body)",
+    )
     p.set_defaults(func=cmd_replay)
     return p
 
@@ -868,7 +883,9 @@ def cmd_replay(args) -> int:
         path = write_html(plan, args.html, speed=args.speed, geometry=args.geometry)
         print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB; open it in a browser)")
         return 0
-    scene = build_scene(plan, speed=args.speed, geometry=args.geometry)
+    scene = build_scene(
+        plan, speed=args.speed, geometry=args.geometry, follow=not args.fixed_camera
+    )
     with ReplayServer(host, args.port, allow_remote=args.allow_remote) as server:
         server.show(scene)
         print(f"replay of {args.plan}: open {server.url}", flush=True)

@@ -371,3 +371,17 @@ def test_bad_plan_file_is_one_line_error(command, tmp_path, capsys):
         err = capsys.readouterr().err.strip()
         assert err.count("\n") == 0 and name in err and expect in err, err
     assert not (tmp_path / "x.html").exists() and not (tmp_path / "plots").exists()
+
+
+def test_view_follows_the_body_unless_fixed(scene, walk):
+    _, plan, series = walk
+    clips, _ = _animation(scene)
+    (root,) = [p for p in clips if p.endswith("stratawalk")]
+    times, pos = _track(clips, root, "position")
+    pos = np.asarray(pos, float).reshape(-1, 3)
+    # the world is moved so that the base stays at the view centre
+    np.testing.assert_allclose(pos[:, :2], -series.base_W[:, :2], atol=1e-9)
+    assert np.ptp(pos[:, 2]) == 0.0 and scene.info["follow"] is True
+    fixed = build_scene(plan, series, follow=False)
+    clips_fixed, _ = _animation(fixed)
+    assert not [p for p in clips_fixed if p.endswith("stratawalk")]
