@@ -208,6 +208,38 @@ def _cmd_demo(args) -> int:
     return rc
 
 
+def _add_export_parser(subparsers):
+    """Add ``export plan.json --rate HZ --out FILE.csv|FILE.npz``."""
+    p = subparsers.add_parser(
+        "export", help="a plan as a fixed-rate trajectory (CSV or npz) for a controller"
+    )
+    p.add_argument("plan", help="plan.json written by `stratawalk plan`")
+    p.add_argument("--rate", type=float, default=500.0, help="rows per second (default 500)")
+    p.add_argument("--out", required=True, help="FILE.csv or FILE.npz")
+    p.set_defaults(func=_cmd_export)
+    return p
+
+
+def _cmd_export(args) -> int:
+    """Run ``stratawalk export`` (planner/export.py)."""
+    from pathlib import Path
+
+    from planner.export import export_plan
+    from planner.plan import Plan
+
+    if Path(args.out).is_dir():
+        raise InputError(f"--out {args.out}: is a folder; give a .csv or .npz file name")
+    if Path(args.out).suffix not in (".csv", ".npz"):
+        raise InputError(f"--out {args.out}: give a .csv or .npz file name")
+    traj = export_plan(Plan.load(args.plan), args.rate)
+    path = traj.save(args.out)
+    print(
+        f"wrote {path}: {len(traj.t)} rows at {traj.rate_hz:g} Hz, {traj.t[-1] - traj.t[0]:.2f} s, "
+        f"{len(traj.columns())} columns"
+    )
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """Argument parser of the ``stratawalk`` command."""
     p = argparse.ArgumentParser(prog="stratawalk", description=__doc__)
@@ -279,9 +311,7 @@ def build_parser() -> argparse.ArgumentParser:
     from planner.course_gen import add_generate_parser
 
     add_generate_parser(sub)
-    from planner.export import add_export_parser
-
-    add_export_parser(sub)
+    _add_export_parser(sub)
     return p
 
 

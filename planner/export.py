@@ -29,14 +29,16 @@ import csv
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
 from planner.errors import InputError
-from planner.plan import Plan
 from planner.robot import LEG_NAMES
+
+if TYPE_CHECKING:
+    from planner.plan import Plan
 
 __all__ = ["ExportedTrajectory", "export_plan", "load_trajectory", "plan_from_trajectory"]
 
@@ -237,42 +239,13 @@ def load_trajectory(path: str | Path) -> ExportedTrajectory:
 
 def plan_from_trajectory(plan: Plan, traj: ExportedTrajectory) -> Plan:
     """``plan`` (robot, terrain, goal) with the trajectory's rows as its samples."""
-    from planner.plan import Samples
-
     robot = plan.load_robot()
     if list(traj.joint_names) != list(robot.joint_names):
         raise InputError(
             f"trajectory joints {traj.joint_names[:3]}... are not the plan's robot's "
             f"{list(robot.joint_names)[:3]}...; export this plan"
         )
-    out = Plan.from_dict(plan.to_dict(), source=f"{plan.source} (exported trajectory)")
-    out.samples = Samples(traj.t.copy(), traj.pinocchio_q(), traj.contact.copy())
+    out = type(plan).from_dict(plan.to_dict(), source=f"{plan.source} (exported trajectory)")
+    out.samples = type(plan.samples)(traj.t.copy(), traj.pinocchio_q(), traj.contact.copy())
     out._robot_cache, out._terrain_cache = plan._robot_cache, plan._terrain_cache
     return out
-
-
-def add_export_parser(subparsers) -> Any:
-    """Add ``export plan.json --rate HZ --out FILE.csv|FILE.npz``."""
-    p = subparsers.add_parser(
-        "export", help="a plan as a fixed-rate trajectory (CSV or npz) for a controller"
-    )
-    p.add_argument("plan", help="plan.json written by `stratawalk plan`")
-    p.add_argument("--rate", type=float, default=500.0, help="rows per second (default 500)")
-    p.add_argument("--out", required=True, help="FILE.csv or FILE.npz")
-    p.set_defaults(func=cmd_export)
-    return p
-
-
-def cmd_export(args) -> int:
-    """Run ``stratawalk export``."""
-    if Path(args.out).is_dir():
-        raise InputError(f"--out {args.out}: is a folder; give a .csv or .npz file name")
-    if Path(args.out).suffix not in (".csv", ".npz"):
-        raise InputError(f"--out {args.out}: give a .csv or .npz file name")
-    traj = export_plan(Plan.load(args.plan), args.rate)
-    path = traj.save(args.out)
-    print(
-        f"wrote {path}: {len(traj.t)} rows at {traj.rate_hz:g} Hz, {traj.t[-1] - traj.t[0]:.2f} s, "
-        f"{len(traj.columns())} columns"
-    )
-    return 0

@@ -599,12 +599,6 @@ class Plan:
         return cls.from_dict(data, source=source)
 
     # ---- rebuilding -------------------------------------------------------------------
-    def export(self, rate_hz: float = 500.0):
-        """The plan at a fixed rate for a controller (:func:`planner.export.export_plan`)."""
-        from planner.export import export_plan
-
-        return export_plan(self, rate_hz)
-
     def load_robot(self) -> Robot:
         """The plan's robot: ``robot.urdf`` if that file exists, else ``robot.name``."""
         if self._robot_cache is None:

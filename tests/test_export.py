@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from planner.cli import main
-from planner.export import load_trajectory, plan_from_trajectory
+from planner.export import export_plan, load_trajectory, plan_from_trajectory
 from planner.plan import Plan, Samples
 from planner.simulate import cycle_starts, run_open_loop
 from planner.walk import plan_walk
@@ -49,7 +49,7 @@ def test_rows_reproduce_the_plan_samples_at_their_times(plan, csv_traj):
 
 
 def test_npz_and_csv_hold_the_same_rows(plan, csv_traj, tmp_path):
-    out = plan.export(500.0).save(tmp_path / "p.npz")
+    out = export_plan(plan, 500.0).save(tmp_path / "p.npz")
     npz = load_trajectory(out)
     assert npz.columns() == csv_traj.columns() and len(npz.columns()) == 66
     np.testing.assert_array_equal(npz.table(), csv_traj.table())
