@@ -83,7 +83,7 @@ def test_demo_ends_with_the_replay_and_the_figures(walk, tmp_path, monkeypatch, 
         # the demo hands _cmd_plan every option of `stratawalk plan` (a missing one crashed it)
         assert (args.planner, args.time_budget, args.jit, args.global_plan) == (
             "soft",
-            120.0,
+            None,  # the settings' default (120 s)
             False,
             False,
         )
