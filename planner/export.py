@@ -133,7 +133,7 @@ def _omega_W(qa: _Array, qb: _Array, dt: float) -> _Array:
 def export_plan(plan: Plan, rate_hz: float) -> ExportedTrajectory:
     """The plan at ``rate_hz`` (module docstring); InputError for a bad rate or plan."""
     from planner.simulate import loaded_feet
-    from planner.torques import TorqueCheck, holding_torques_nm
+    from planner.torques import TorqueCheck, holding_load
 
     if not (isinstance(rate_hz, (int, float)) and math.isfinite(rate_hz) and rate_hz > 0):
         raise InputError(f"--rate: must be a number of rows per second > 0, got {rate_hz!r}")
@@ -161,8 +161,7 @@ def export_plan(plan: Plan, rate_hz: float) -> ExportedTrajectory:
         terrain = None
     check = TorqueCheck(robot)
     loaded = loaded_feet(s.contact)
-    tau = holding_torques_nm(check, s.q, loaded, plan.friction, terrain)
-    forces = _holding_forces(check, s.q, loaded, plan.friction, terrain)
+    forces, tau = holding_load(check, s.q, loaded, plan.friction, terrain)
     u = ((t - times[k]) / dt_seg[k])[:, None]
     joints = np.array([leg.q_index + j for leg in robot.legs for j in range(3)])
     return ExportedTrajectory(
@@ -181,23 +180,6 @@ def export_plan(plan: Plan, rate_hz: float) -> ExportedTrajectory:
         ),
         torque_ff=(1 - u) * tau[k] + u * tau[k + 1],
     )
-
-
-def _holding_forces(check, q, loaded, mu, terrain) -> _Array:
-    """(N, 4, 3) the least-squares holding forces at the samples (as the torques)."""
-    import pinocchio as pin
-
-    out = np.zeros((len(q), 4, 3))
-    up = np.array([0.0, 0.0, 1.0])
-    for i, (qi, ci) in enumerate(zip(q, loaded, strict=True)):
-        if not ci.any():
-            continue
-        pin.framesForwardKinematics(check.model, check.data, qi)
-        centres = np.array([check.data.oMf[f].translation for f in check.foot_ids])
-        normals = terrain.normal(centres) if terrain is not None else np.tile(up, (4, 1))
-        res = check.solve(qi, np.flatnonzero(ci), mu, normals, least_squares=True)
-        out[i] = res.forces_W if np.all(np.isfinite(res.torques_nm)) else out[i - 1]
-    return out
 
 
 def load_trajectory(path: str | Path) -> ExportedTrajectory:

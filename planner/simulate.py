@@ -45,7 +45,7 @@ from numpy.typing import NDArray
 
 from planner.errors import InputError
 from planner.plan import Keyframe, Plan, Samples, TerrainGrid
-from planner.torques import TorqueCheck, holding_torques_nm
+from planner.torques import TorqueCheck, holding_load
 
 if TYPE_CHECKING:
     from planner.robot import Robot
@@ -114,7 +114,7 @@ class SimSettings:
     sliding_min_load_frac : sliding counts while the foot carries at least this fraction
         of the weight (a foot unloaded before its lift-off may drift; it is leaving anyway).
     feedforward : add to each servo the torque that holds the planned configuration still
-        on its planned feet (:func:`planner.torques.holding_torques_nm`), as a set-point
+        on its planned feet (:func:`planner.torques.holding_load`), as a set-point
         offset tau / kp, so the servo need not sag by tau / kp to produce it. Gains, effort
         limits and contact are unchanged: the total servo torque still saturates at the
         effort limit. Off, the servos are pure PD on the joint set-points.
@@ -515,7 +515,7 @@ class Simulator:
         if self._holding is None:
             self._holding = TorqueCheck(self.robot)
         c = np.atleast_2d(np.asarray(contact, bool))
-        return holding_torques_nm(self._holding, q, c, self.friction, self.terrain)
+        return holding_load(self._holding, q, c, self.friction, self.terrain)[1]
 
     def saturated(self) -> bool:
         """Whether any servo is at its torque limit."""
@@ -731,32 +731,26 @@ class Monitor:
             self.contact.append(np.asarray(ci, bool))
             self.torque_ff.append(np.asarray(fi, float))
 
-    def feedforward_at(self, t: float) -> _Array:
-        """(12,) feed-forward torques [N m] at simulator time ``t`` (linear between samples)."""
+    def _bracket(self, t: float) -> tuple[int, int, float]:
+        """Reference samples (k, k2) around simulator time ``t`` and the weight u of k2."""
         ts = self.t
         k = int(np.searchsorted(ts, t, side="right")) - 1
         if k < 0:
-            return self.torque_ff[0]
+            return 0, 0, 0.0
         if k >= len(ts) - 1:
-            return self.torque_ff[-1]
-        u = (t - ts[k]) / (ts[k + 1] - ts[k])
-        return (1.0 - u) * self.torque_ff[k] + u * self.torque_ff[k + 1]
+            return len(ts) - 1, len(ts) - 1, 0.0
+        return k, k + 1, (t - ts[k]) / (ts[k + 1] - ts[k])
+
+    def feedforward_at(self, t: float) -> _Array:
+        """(12,) feed-forward torques [N m] at simulator time ``t`` (linear between samples)."""
+        k, k2, u = self._bracket(t)
+        return (1.0 - u) * self.torque_ff[k] + u * self.torque_ff[k2]
 
     def reference_at(self, t: float) -> tuple[_Array, _Array, NDArray, NDArray]:
         """(set-point joints (12,), base q (7,), planned stance (4,), planned swing (4,))."""
-        ts = self.t
-        k = int(np.searchsorted(ts, t, side="right")) - 1
-        if k < 0:
-            q = self.q[0]
-            return q[self.sim._pin_idx], q[:7], self.contact[0], ~self.contact[0]
-        if k >= len(ts) - 1:
-            q = self.q[-1]
-            c = self.contact[-1]
-            return q[self.sim._pin_idx], q[:7], c, ~c
-        u = (t - ts[k]) / (ts[k + 1] - ts[k])
-        qa, qb = self.q[k], self.q[k + 1]
-        q = (1.0 - u) * qa + u * qb
-        ca, cb = self.contact[k], self.contact[k + 1]
+        k, k2, u = self._bracket(t)
+        q = (1.0 - u) * self.q[k] + u * self.q[k2]
+        ca, cb = self.contact[k], self.contact[k2]
         return q[self.sim._pin_idx], q[:7], ca & cb, ~ca & ~cb
 
     # ---- measuring --------------------------------------------------------------------

@@ -39,7 +39,7 @@ if TYPE_CHECKING:
     from planner.robot import Robot
     from planner.terrain import Terrain
 
-__all__ = ["TorqueCheck", "TorqueFeasibility", "holding_torques_nm", "joint_efforts_nm"]
+__all__ = ["TorqueCheck", "TorqueFeasibility", "holding_load", "joint_efforts_nm"]
 
 _Array = NDArray[np.float64]
 _SOLVED = ("Solved", "AlmostSolved")
@@ -179,23 +179,24 @@ class TorqueCheck:
         return TorqueFeasibility(ratio, np.full(12, np.nan), forces, -1, status)
 
 
-def holding_torques_nm(
+def holding_load(
     check: TorqueCheck, q: _Array, contact: NDArray[np.bool_], mu: float, terrain: Terrain | None
-) -> _Array:
-    """(N, 12) joint torques [N m] that hold each of ``q`` (N, 19) still on its ``contact`` feet.
+) -> tuple[_Array, _Array]:
+    """Forces (N, 4, 3) [N] and joint torques (N, 12) [N m] holding each ``q`` (N, 19) still.
 
-    Per sample, the least-squares torques of :meth:`TorqueCheck.solve` (balancing forces
-    in the friction cones; normals from ``terrain`` at the foot centres, vertical without
-    a terrain). With uniform servo stiffness these are the forces stiff servos settle
-    into (least complementary energy), so no internal forces push the feet. A sample
-    where no admissible forces balance the robot keeps the previous sample's torques
-    (zeros before the first): these are feed-forward torques for the servos, not a check.
+    Per sample, the least-squares solution of :meth:`TorqueCheck.solve` on the ``contact``
+    feet (balancing forces in the friction cones; normals from ``terrain`` at the foot
+    centres, vertical without a terrain). With uniform servo stiffness these are the
+    forces stiff servos settle into (least complementary energy), so no internal forces
+    push the feet. A sample where no admissible forces balance the robot keeps the
+    previous sample's values (zeros before the first): these are feed-forward for the
+    servos, not a check.
     """
     q = np.asarray(q, float)
     contact = np.asarray(contact, bool)
     model, data = check.model, check.data
-    out = np.zeros((len(q), 12))
-    last = np.zeros(12)
+    forces, torques = np.zeros((len(q), 4, 3)), np.zeros((len(q), 12))
+    last_f, last_tau = np.zeros((4, 3)), np.zeros(12)
     for k, (qk, ck) in enumerate(zip(q, contact, strict=True)):
         if ck.any():
             pin.framesForwardKinematics(model, data, qk)
@@ -203,6 +204,6 @@ def holding_torques_nm(
             normals = terrain.normal(centres) if terrain is not None else np.tile(_E_Z, (4, 1))
             res = check.solve(qk, np.flatnonzero(ck), mu, normals, least_squares=True)
             if np.all(np.isfinite(res.torques_nm)):
-                last = res.torques_nm
-        out[k] = last
-    return out
+                last_f, last_tau = res.forces_W, res.torques_nm
+        forces[k], torques[k] = last_f, last_tau
+    return forces, torques
