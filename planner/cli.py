@@ -197,11 +197,11 @@ def _cmd_demo(args) -> int:
     print(f"plan: {out / 'plan.json'}  (check it: stratawalk check {out / 'plan.json'})")
     from planner.plan import Plan
     from planner.plots import plan_series, plot_plan
-    from planner.replay import build_scene
+    from planner.replay import write_html
 
     plan = Plan.load(out / "plan.json")
     series = plan_series(plan)
-    (out / "replay.html").write_text(build_scene(plan, series).html(), encoding="utf-8")
+    write_html(plan, out / "replay.html", series=series)
     figures = plot_plan(plan, out / "figures", series=series)
     print(f"replay: {out / 'replay.html'}  (open it in a browser; no server needed)")
     print(f"figures: {', '.join(str(f) for f in figures)}")

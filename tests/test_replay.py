@@ -1,6 +1,7 @@
 """Replay in meshcat: the scene, the self-contained HTML in a real browser, the live server."""
 
 import base64
+import copy
 import fcntl
 import io
 import json
@@ -21,6 +22,7 @@ from PIL import Image
 
 from planner.cli import main
 from planner.errors import InputError
+from planner.plan import Samples
 from planner.replay import ReplayServer, build_scene, check_host, scene_html
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
@@ -46,9 +48,26 @@ def _animation(scene):
     return {a["path"].split("/stratawalk/")[-1]: a["clip"] for a in anim["animations"]}, anim
 
 
-def _track(clips, path, prop):
+_WIDTH = {"vector3": 3, "quaternion": 4, "color": 3}
+
+
+def _track(clips, path, prop, times=None):
+    """(key times, values) of one track; with ``times``, its value at each of those times
+    (three.js's linear interpolation between the kept keys; booleans hold)."""
     (track,) = [t for t in clips[path]["tracks"] if t["name"] == "." + prop]
-    return np.array([k["time"] for k in track["keys"]]), [k["value"] for k in track["keys"]]
+    tk = np.frombuffer(track["times"].data, dtype="<f4").astype(float)
+    if track["type"] == "boolean":
+        v = np.array(track["values"], dtype=bool)
+        if times is None:
+            return tk, list(v)
+        i = np.searchsorted(tk, np.asarray(times) + 1e-5, side="right") - 1
+        return np.asarray(times), list(v[np.maximum(i, 0)])
+    v = np.frombuffer(track["values"].data, dtype="<f4").astype(float)
+    v = v.reshape(len(tk), _WIDTH[track["type"]])
+    if times is None:
+        return tk, v
+    at = [np.interp(times, tk, v[:, j]) for j in range(v.shape[1])]
+    return np.asarray(times), np.stack(at, axis=1)
 
 
 # ---------------------------------------------------------------------------- the scene
@@ -91,48 +110,56 @@ def test_animation_follows_the_samples(scene, walk):
     t = plan.samples.time
     # every clip spans the whole walk (else clips loop out of step with each other)
     for path, clip in clips.items():
-        times = [k["time"] for tr in clip["tracks"] for k in tr["keys"]]
-        assert min(times) == pytest.approx(t[0]) and max(times) == pytest.approx(t[-1]), path
-    # each visual follows Pinocchio's placement of it at every sample's q
+        for tr in clip["tracks"]:
+            times = np.frombuffer(tr["times"].data, dtype="<f4")
+            assert times[0] == pytest.approx(t[0]) and times[-1] == pytest.approx(t[-1]), path
+            assert np.all(np.diff(times) > 0), path
+    # each visual follows Pinocchio's placement of it at every sample's q (float32: 1 um)
     robot = plan.load_robot()
     model, data = robot.model, robot.model.createData()
     visual = pin.buildGeomFromUrdf(model, str(robot.urdf_path), pin.GeometryType.VISUAL)
     gdata = pin.GeometryData(visual)
-    times, pos = _track(clips, "robot/HL_lower_0", "position")
-    np.testing.assert_allclose(times, t)
+    _, pos = _track(clips, "robot/HL_lower_0", "position", times=t)
+    _, quat = _track(clips, "robot/HL_lower_0", "quaternion", times=t)
     gid = visual.getGeometryId("HL_lower_0")
-    for k in (0, len(t) // 2, len(t) - 1):
+    for k in range(len(t)):
         pin.forwardKinematics(model, data, plan.samples.q[k])
         pin.updateGeometryPlacements(model, data, visual, gdata)
-        np.testing.assert_allclose(pos[k], gdata.oMg[gid].translation, atol=1e-12)
-    # stance / swing colours flip exactly with the contact flags
+        np.testing.assert_allclose(pos[k], gdata.oMg[gid].translation, atol=2e-6)
+        r = pin.Quaternion(quat[k, 3], *quat[k, :3]).normalized().matrix()
+        np.testing.assert_allclose(r, gdata.oMg[gid].rotation, atol=1e-5)
+    # stance / swing colours flip exactly with the contact flags, at every sample
     for leg, name in enumerate(("FL", "FR", "HL", "HR")):
-        times, vis = _track(clips, f"feet/{name}/stance", "visible")
-        down = plan.samples.contact[:, leg]
-        for tk, v in zip(times, vis, strict=True):
-            k = int(np.flatnonzero(np.isclose(t, tk))[0])
-            assert v == bool(down[k])
-        times_s, vis_s = _track(clips, f"feet/{name}/swing", "visible")
-        assert [not v for v in vis_s] == vis and np.allclose(times_s, times)
+        _, vis = _track(clips, f"feet/{name}/stance", "visible", times=t)
+        _, vis_s = _track(clips, f"feet/{name}/swing", "visible", times=t)
+        assert vis == list(plan.samples.contact[:, leg])
+        assert [not v for v in vis_s] == vis
     # arrows: length proportional to newtons, colour from the cone margin
     m_per_N = scene.info["m_per_N"]
-    _, scale = _track(clips, "forces/HR/shaft", "scale")
-    _, tip = _track(clips, "forces/HR/head", "position")
+    _, scale = _track(clips, "forces/HR/shaft", "scale", times=t)
+    _, tip = _track(clips, "forces/HR/head", "position", times=t)
     head = scene.info["arrow_head_m"]
-    length = np.array(scale)[:, 2] + head
+    length = scale[:, 2] + head
     mag = np.linalg.norm(series.forces_W[:, 3], axis=1)
     on = mag * m_per_N > head + 1e-3
     assert on.sum() > len(t) // 2
-    np.testing.assert_allclose(length[on], mag[on] * m_per_N, rtol=1e-9)
-    np.testing.assert_allclose(np.array(tip)[:, 2], np.array(scale)[:, 2])
-    _, colour = _track(clips, "forces/HR/shaft/<object>", "material.color")
-    assert np.all(np.array(colour)[on, 1] > np.array(colour)[on, 0])  # inside the cone: green
+    np.testing.assert_allclose(length[on], mag[on] * m_per_N, rtol=1e-6)
+    np.testing.assert_allclose(tip[:, 2], scale[:, 2])
+    _, colour = _track(clips, "forces/HR/shaft/<object>", "material.color", times=t)
+    assert np.all(colour[on, 1] > colour[on, 0])  # inside the cone: green
+    _, arrow_q = _track(clips, "forces/HR", "quaternion", times=t)
+    for k in np.flatnonzero(on)[:: max(1, on.sum() // 20)]:
+        r = pin.Quaternion(arrow_q[k, 3], *arrow_q[k, :3]).normalized().matrix()
+        direction = series.forces_W[k, 3] / mag[k]
+        np.testing.assert_allclose(r[:, 2], direction, atol=1e-5)  # the arrow points along f
     # the stratum label shown is the sample's stratum
     for st in range(5):
-        times, vis = _track(clips, f"stratum/S{st}", "visible")
-        for tk, v in zip(times, vis, strict=True):
-            k = int(np.flatnonzero(np.isclose(t, tk))[0])
-            assert v == (series.stratum[k] == st)
+        _, vis = _track(clips, f"stratum/S{st}", "visible", times=t)
+        assert vis == list(series.stratum == st)
+    # keys are dropped only where a track holds still: fewer keys than samples x tracks
+    n_keys = sum(len(tr["times"].data) // 4 for c in clips.values() for tr in c["tracks"])
+    n_tracks = sum(len(c["tracks"]) for c in clips.values())
+    assert n_keys < 0.8 * n_tracks * len(t)
 
 
 def test_html_is_self_contained(scene):
@@ -215,14 +242,24 @@ class _Chromium:
                     return self.events.pop(i)
             self.events.append(self._message(deadline))
 
-    def open(self, url):
+    def open(self, url, ready=False, timeout=60.0):
+        """Open ``url``; with ``ready``, wait until the replay page has its scene in."""
         target = self.call("Target.createTarget", url="about:blank")["targetId"]
         session = self.call("Target.attachToTarget", targetId=target, flatten=True)["sessionId"]
         for domain in ("Page", "Network", "Runtime"):
             self.call(f"{domain}.enable", session=session)
         self.call("Page.navigate", session=session, url=url)
         self.wait_for("Page.loadEventFired")
+        deadline = time.monotonic() + timeout
+        while ready and self.evaluate(session, "document.body.dataset.ready || ''") != "1":
+            assert time.monotonic() < deadline, f"{url}: the replay did not load its scene"
+            time.sleep(0.1)
         return session
+
+    def evaluate(self, session, expression):
+        res = self.call("Runtime.evaluate", session=session, expression=expression,
+                        returnByValue=True)  # fmt: skip
+        return res["result"].get("value")
 
     def screenshot(self, session):
         data = self.call("Page.captureScreenshot", session=session, format="png")["data"]
@@ -265,7 +302,7 @@ def test_exported_html_plays_in_a_browser(chromium, walk, tmp_path, capsys):
     out = tmp_path / "replay.html"
     assert main(["replay", str(path), "--html", str(out)]) == 0
     assert "wrote" in capsys.readouterr().out
-    session = chromium.open(out.as_uri())
+    session = chromium.open(out.as_uri(), ready=True)
     time.sleep(1.0)
     png1, a = chromium.screenshot(session)
     time.sleep(1.5)
@@ -377,11 +414,107 @@ def test_view_follows_the_body_unless_fixed(scene, walk):
     _, plan, series = walk
     clips, _ = _animation(scene)
     (root,) = [p for p in clips if p.endswith("stratawalk")]
-    times, pos = _track(clips, root, "position")
-    pos = np.asarray(pos, float).reshape(-1, 3)
+    _, pos = _track(clips, root, "position", times=plan.samples.time)
     # the world is moved so that the base stays at the view centre
-    np.testing.assert_allclose(pos[:, :2], -series.base_W[:, :2], atol=1e-9)
+    np.testing.assert_allclose(pos[:, :2], -series.base_W[:, :2], atol=2e-6)
     assert np.ptp(pos[:, 2]) == 0.0 and scene.info["follow"] is True
     fixed = build_scene(plan, series, follow=False)
     clips_fixed, _ = _animation(fixed)
     assert not [p for p in clips_fixed if p.endswith("stratawalk")]
+
+
+# ---------------------------------------------------------------------------- compare
+def test_compare_draws_a_second_motion_on_the_same_clock(walk):
+    path, plan, series = walk
+    other = copy.deepcopy(plan)
+    other.samples = Samples(plan.samples.time * 1.5, plan.samples.q.copy(), plan.samples.contact)
+    other.samples.q[:, 1] += 0.05  # 5 cm to the left, and half as fast
+    scene = build_scene(plan, series, compare=other)
+    clips, _ = _animation(scene)
+    end = float(other.samples.time[-1])
+    assert scene.info["end"] == pytest.approx(end, abs=1e-4)
+    for clip_path, clip in clips.items():  # every clip lasts until the longer motion ends
+        for tr in clip["tracks"]:
+            assert np.frombuffer(tr["times"].data, "<f4")[-1] == pytest.approx(end), clip_path
+    # the compared robot is see-through and follows its own samples
+    objects = {umsgpack.unpackb(b)["path"].split("/stratawalk/")[-1]: umsgpack.unpackb(b)
+               for k, _, b in scene.commands if k == "set_object"}  # fmt: skip
+    body = objects["compare/body_0"]["object"]["materials"][0]
+    assert body["transparent"] and body["opacity"] < 0.5
+    _, own = _track(clips, "robot/body_0", "position", times=plan.samples.time)
+    _, cmp = _track(clips, "compare/body_0", "position", times=other.samples.time)
+    np.testing.assert_allclose(cmp[:, 1] - own[:, 1], 0.05, atol=2e-6)
+    np.testing.assert_allclose(cmp[:, [0, 2]], own[:, [0, 2]], atol=2e-6)
+    # the plan's own robot holds its last pose until the compared motion ends
+    _, last = _track(clips, "robot/body_0", "position", times=[end])
+    np.testing.assert_allclose(last[0], own[-1], atol=1e-9)
+
+
+def test_compare_from_the_command_line(walk, tmp_path, capsys):
+    path, plan, _ = walk
+    out = tmp_path / "side_by_side.html"
+    assert main(["replay", str(path), "--compare", str(path), "--html", str(out)]) == 0
+    assert out.exists() and "wrote" in capsys.readouterr().out
+    # another robot, or a file that is not a plan: one line naming the option and the file
+    d = json.loads(Path(path).read_text())
+    d["robot"]["name"] = "solo12"
+    bad = tmp_path / "solo.json"
+    bad.write_text(json.dumps(d))
+    for other, expect in ((bad, "same robot"), (tmp_path / "missing.json", "no such file")):
+        assert main(["replay", str(path), "--compare", str(other), "--html", str(out)]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.count("\n") == 0 and other.name in err and expect in err, err
+
+
+# ---------------------------------------------------------------------------- a long walk
+@pytest.fixture(scope="module")
+def long_walk(tmp_path_factory):
+    """A real 4 m walk (soft persuasion) on a 5 m flat course."""
+    from planner.local.base import LocalSettings
+    from planner.walk import plan_walk
+
+    folder = tmp_path_factory.mktemp("long")
+    course = folder / "flat5.yaml"
+    course.write_text(
+        "name: flat5\ndescription: Level ground, 5 m long.\nfriction: 0.7\n"
+        "x_min: -0.5\nlength: 5.0\ny_min: -0.6\ny_max: 0.6\nkind: flat\n"
+    )
+    plan, report = plan_walk(
+        "littledog", str(course), (4.2, 0.0), (0.2, 0.0), "soft", LocalSettings(time_budget_s=900)
+    )
+    assert report.ok and plan.outcome["reached_goal"], report.summary()
+    return plan.save(folder / "plan.json")
+
+
+def _robot_pixels(chromium, session, t_plan, speed):
+    """Pixels the robot covers in the page at plan time ``t_plan`` (robot shown vs hidden)."""
+    shots = []
+    for shown in ("true", "false"):
+        js = (f"(function(){{const a = viewer.animator; a.pause(); a.seek({t_plan / speed});"
+              f" viewer.scene_tree.find(['meshcat','stratawalk','robot']).object.visible = {shown};"
+              f" viewer.set_dirty(); return 1; }})()")  # fmt: skip
+        chromium.evaluate(session, js)
+        time.sleep(0.5)
+        shots.append(chromium.screenshot(session)[1][:-60])  # above the control bar
+    return int(np.count_nonzero(np.abs(shots[0] - shots[1]).sum(axis=-1) > 30))
+
+
+def test_robot_keeps_its_size_over_a_4m_walk(chromium, long_walk, tmp_path):
+    from planner.plan import Plan
+
+    plan = Plan.load(long_walk)
+    assert plan.samples.q[-1, 0] - plan.samples.q[0, 0] > 3.9
+    areas = {}
+    for camera in ("follow", "fixed"):
+        out = tmp_path / f"{camera}.html"
+        args = ["replay", str(long_walk), "--html", str(out)]
+        assert main(args + (["--fixed-camera"] if camera == "fixed" else [])) == 0
+        session = chromium.open(out.as_uri(), ready=True)
+        t_end = float(plan.samples.time[-1])
+        areas[camera] = [_robot_pixels(chromium, session, t, 4.0) for t in (0.0, t_end)]
+    print(f"robot pixels at the start and end of 4 m (follow, fixed): {areas}")
+    start, end = areas["follow"]
+    assert start > 2000 and 0.5 < end / start < 2.0, areas
+    # the same walk under a camera framing the whole course: the robot shrinks (the test bites)
+    start_fixed, end_fixed = areas["fixed"]
+    assert max(start_fixed, end_fixed) < 0.5 * start, areas
