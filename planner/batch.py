@@ -56,6 +56,7 @@ from typing import Any
 import yaml
 
 from planner.errors import InputError
+from planner.outputs import check_folder
 
 __all__ = [
     "DEFAULTS",
@@ -572,6 +573,7 @@ def cmd_batch(args) -> int:
     """``stratawalk batch``: exit 0 when every job finished without error, 1 otherwise."""
     if args.workers is not None and args.workers < 1:
         raise InputError(f"--workers: must be >= 1, got {args.workers}")
+    check_folder(args.out, "--out")
     jobs = load_scenarios(args.scenarios)
     s = run_batch(
         jobs,

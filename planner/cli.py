@@ -62,6 +62,10 @@ def _cmd_terrain(args) -> int:
     if args.name is None:
         print("\n".join(list_terrains()))
         return 0
+    if args.png:
+        from planner.outputs import check_file
+
+        check_file(args.png, "--png", suffixes=(".png",))
     terrain = load_terrain(args.name)
     print(f"terrain {terrain.name}: bounds {terrain.bounds}")
     if args.png:
@@ -75,7 +79,7 @@ def _cmd_terrain(args) -> int:
 def _cmd_check(args) -> int:
     from planner.validate import main_check
 
-    return main_check(args.plan)
+    return main_check(args.plan, robot=args.robot, show_all=args.all)
 
 
 def _parse_xy(text: str, field: str) -> tuple[float, float]:
@@ -122,7 +126,7 @@ def _cmd_plan(args) -> int:
     import time
     from dataclasses import replace
 
-    from planner.plan import check_output_path
+    from planner.outputs import check_file
     from planner.robot import load_robot
     from planner.settings import effective
     from planner.terrain import load_terrain
@@ -142,7 +146,7 @@ def _cmd_plan(args) -> int:
     goal = _parse_xy(args.goal, "goal")
     start = _parse_xy(args.start, "start")
     check_endpoints(robot, terrain, start, goal, ("--start", "--goal"))
-    check_output_path(args.out)
+    check_file(args.out, "--out")
     t0 = time.perf_counter()
     total = float(np.hypot(goal[0] - start[0], goal[1] - start[1]))
 
@@ -210,28 +214,27 @@ def _cmd_demo(args) -> int:
 
 def _add_export_parser(subparsers):
     """Add ``export plan.json --rate HZ --out FILE.csv|FILE.npz``."""
+    from planner.plan import ROBOT_HELP
+
     p = subparsers.add_parser(
         "export", help="a plan as a fixed-rate trajectory (CSV or npz) for a controller"
     )
     p.add_argument("plan", help="plan.json written by `stratawalk plan`")
     p.add_argument("--rate", type=float, default=500.0, help="rows per second (default 500)")
     p.add_argument("--out", required=True, help="FILE.csv or FILE.npz")
+    p.add_argument("--robot", metavar="URDF", help=ROBOT_HELP)
     p.set_defaults(func=_cmd_export)
     return p
 
 
 def _cmd_export(args) -> int:
     """Run ``stratawalk export`` (planner/export.py)."""
-    from pathlib import Path
-
     from planner.export import export_plan
+    from planner.outputs import check_file
     from planner.plan import Plan
 
-    if Path(args.out).is_dir():
-        raise InputError(f"--out {args.out}: is a folder; give a .csv or .npz file name")
-    if Path(args.out).suffix not in (".csv", ".npz"):
-        raise InputError(f"--out {args.out}: give a .csv or .npz file name")
-    traj = export_plan(Plan.load(args.plan), args.rate)
+    check_file(args.out, "--out", suffixes=(".csv", ".npz"))
+    traj = export_plan(Plan.load(args.plan, robot=args.robot), args.rate)
     path = traj.save(args.out)
     print(
         f"wrote {path}: {len(traj.t)} rows at {traj.rate_hz:g} Hz, {traj.t[-1] - traj.t[0]:.2f} s, "
@@ -286,8 +289,12 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--terms", type=int, default=3, help="sine terms of --global's tau")
     pl.add_argument("--generations", type=int, default=8, help="CMA-ES generations (--global)")
     pl.set_defaults(func=_cmd_plan)
+    from planner.plan import ROBOT_HELP
+
     c = sub.add_parser("check", help="validate a plan independently (exit 1 on any violation)")
     c.add_argument("plan", help="plan.json written by `stratawalk plan`")
+    c.add_argument("--robot", metavar="URDF", help=ROBOT_HELP)
+    c.add_argument("--all", action="store_true", help="print every violation (default: 50)")
     c.set_defaults(func=_cmd_check)
     d = sub.add_parser("demo", help="the main job: LittleDog on a rough course")
     d.add_argument("--terrain", default="rough2cm")

@@ -497,6 +497,8 @@ def simulate_plan(
 # ------------------------------------------------------------------------------ command line
 def add_simulate_parser(subparsers) -> Any:
     """Add ``simulate plan.json [--feedback|--correct] [--time-scale S] [--out sim.json]``."""
+    from planner.plan import ROBOT_HELP
+
     p = subparsers.add_parser(
         "simulate", help="execute a plan in MuJoCo (open loop, feedback 8.3, correction 8.4)"
     )
@@ -528,13 +530,14 @@ def add_simulate_parser(subparsers) -> Any:
         "--trajectory",
         help="execute this `stratawalk export` file (CSV or npz) of the plan, open loop",
     )
+    p.add_argument("--robot", metavar="URDF", help=ROBOT_HELP)
     p.set_defaults(func=cmd_simulate)
     return p
 
 
 def cmd_simulate(args) -> int:
     """Run ``stratawalk simulate``; exit 0 when the run is OK, 1 otherwise."""
-    plan = Plan.load(args.plan)
+    plan = Plan.load(args.plan, robot=args.robot)
     settings = SimSettings(
         time_scale=args.time_scale, timestep_s=args.timestep, feedforward=not args.no_feedforward
     )

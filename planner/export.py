@@ -95,25 +95,25 @@ class ExportedTrajectory:
 
     def save(self, path: str | Path) -> Path:
         """Write CSV (``.csv``) or npz (``.npz``), chosen by the suffix."""
-        path = Path(path)
-        if path.suffix not in (".csv", ".npz"):
-            raise InputError(f"--out {path}: give a .csv or .npz file name")
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(path.name + ".part")
-        if path.suffix == ".npz":
-            with open(tmp, "wb") as fh:
-                np.savez_compressed(
-                    fh, columns=np.array(self.columns()), table=self.table(),
-                    rate_hz=self.rate_hz,
-                )  # fmt: skip
-        else:
-            with open(tmp, "w", newline="", encoding="utf-8") as fh:
-                w = csv.writer(fh)
-                w.writerow(self.columns())
-                for row in self.table():
-                    w.writerow([repr(float(v)) for v in row])
-        tmp.replace(path)
-        return path
+        from planner.outputs import check_file, write_atomic
+
+        path = check_file(path, "--out", suffixes=(".csv", ".npz"))
+
+        def write(tmp: Path) -> None:
+            if path.suffix.lower() == ".npz":
+                with open(tmp, "wb") as fh:
+                    np.savez_compressed(
+                        fh, columns=np.array(self.columns()), table=self.table(),
+                        rate_hz=self.rate_hz,
+                    )  # fmt: skip
+            else:
+                with open(tmp, "w", newline="", encoding="utf-8") as fh:
+                    w = csv.writer(fh)
+                    w.writerow(self.columns())
+                    for row in self.table():
+                        w.writerow([repr(float(v)) for v in row])
+
+        return write_atomic(path, write)
 
 
 def _segment_index(times: _Array, t: _Array) -> NDArray[np.int_]:

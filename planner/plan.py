@@ -24,8 +24,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -278,15 +276,7 @@ class Samples:
         }
 
 
-def check_output_path(path: str | Path) -> Path:
-    """``path`` as a Path; InputError if it is a folder or under a file (before any work)."""
-    path = Path(path)
-    if path.is_dir():
-        raise InputError(f"--out {path}: is a folder; give a file name like {path / 'plan.json'}")
-    for parent in path.parents:
-        if parent.exists() and not parent.is_dir():
-            raise InputError(f"--out {path}: {parent} is a file, not a folder; choose another path")
-    return path
+ROBOT_HELP = "URDF of the plan's robot, if the path the plan file names is gone (moved)"
 
 
 # ------------------------------------------------------------------------------ the plan
@@ -557,27 +547,22 @@ class Plan:
 
     def save(self, path: str | Path) -> Path:
         """Write the plan as JSON (floats at full precision), atomically (temp file + rename)."""
-        path = check_output_path(path)
-        text = json.dumps(self.to_dict(), allow_nan=False, separators=(",", ":"))
-        folder = path.parent if str(path.parent) else Path(".")
-        folder.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
-        try:
-            umask = os.umask(0)
-            os.umask(umask)
-            os.chmod(tmp, 0o666 & ~umask)  # as open() would make it, not mkstemp's 0600
-            with os.fdopen(fd, "w", encoding="utf-8") as fh:
-                fh.write(text)
-                fh.write("\n")
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
-        return path
+        from planner.outputs import check_file, write_atomic
+
+        text = json.dumps(self.to_dict(), allow_nan=False, separators=(",", ":")) + "\n"
+        return write_atomic(check_file(path), lambda tmp: tmp.write_text(text, "utf-8"))
 
     @classmethod
-    def load(cls, path: str | Path) -> Plan:
-        """Read a plan file; one-line :class:`InputError` for anything malformed."""
+    def load(cls, path: str | Path, robot: str | Path | None = None) -> Plan:
+        """Read a plan file; one-line :class:`InputError` for anything malformed.
+
+        ``robot``: a URDF (or robot name) to use instead of the plan's ``robot.urdf``
+        (:meth:`use_robot`), e.g. when that file has moved.
+        """
+        if robot is not None:
+            plan = cls.load(path)
+            plan.use_robot(robot)
+            return plan
         source = str(path)
         rd = _Reader(source)
         try:
@@ -600,15 +585,55 @@ class Plan:
 
     # ---- rebuilding -------------------------------------------------------------------
     def load_robot(self) -> Robot:
-        """The plan's robot: ``robot.urdf`` if that file exists, else ``robot.name``."""
+        """The plan's robot: ``robot.urdf`` if that file exists, else ``robot.name``.
+
+        Raises
+        ------
+        InputError
+            Neither is found (a custom URDF moved): one line saying to pass ``--robot``
+            (:meth:`use_robot`).
+
+        """
         if self._robot_cache is None:
+            from planner.errors import RobotModelError
             from planner.robot import load_robot
 
             urdf = str(self.robot.get("urdf", ""))
-            self._robot_cache = load_robot(
-                urdf if urdf and Path(urdf).is_file() else self.robot["name"]
-            )
+            if urdf and Path(urdf).is_file():
+                self._robot_cache = load_robot(urdf)
+            else:
+                try:
+                    self._robot_cache = load_robot(self.robot["name"])
+                except RobotModelError:
+                    raise InputError(
+                        f"{self.source}: the plan's robot {self.robot['name']!r} was loaded from "
+                        f"{urdf or 'a URDF'}, which is not there now, and is not a known robot "
+                        "name; pass --robot PATH to its URDF"
+                    ) from None
         return self._robot_cache
+
+    def use_robot(self, urdf: str | Path) -> Robot:
+        """Use the robot of ``urdf`` (e.g. its URDF moved) for this plan; return it.
+
+        Raises
+        ------
+        InputError
+            Its joints are not the plan's ``robot.joint_names``.
+
+        """
+        from planner.robot import load_robot
+
+        robot = load_robot(urdf)
+        names = list(robot.joint_names)
+        want = list(self.robot.get("joint_names", names))
+        if names != want:
+            raise InputError(
+                f"--robot {urdf}: its joints {names} are not the plan's {want}; give the URDF "
+                f"the plan was made with"
+            )
+        self._robot_cache = robot
+        self.robot = dict(self.robot, urdf=str(robot.urdf_path))
+        return robot
 
     def load_terrain(self) -> Terrain:
         """The plan's terrain, rebuilt from its spec (``Terrain.from_spec``)."""

@@ -390,6 +390,7 @@ def plot_plan(
     ``plan`` may be a :class:`~planner.plan.Plan` or a path, read with
     :meth:`Plan.load <planner.plan.Plan.load>` (one-line InputError for a bad file).
     """
+    from planner.outputs import write_atomic
     from planner.plan import Plan
 
     plan = plan if isinstance(plan, Plan) else Plan.load(plan)
@@ -400,7 +401,7 @@ def plot_plan(
     for name in FIGURES:
         fig = _DRAW[name](plan, s)
         path = out / f"{name}.png"
-        fig.savefig(path, dpi=dpi)
+        write_atomic(path, lambda tmp, fig=fig: fig.savefig(tmp, dpi=dpi, format="png"))
         paths.append(path)
     return paths
 
@@ -411,13 +412,19 @@ def add_plot_parser(subparsers) -> argparse.ArgumentParser:
     p = subparsers.add_parser("plot", help="figures of a plan (PNG): terrain, margins, gait")
     p.add_argument("plan", help="plan.json written by `stratawalk plan`")
     p.add_argument("--out", default="plots", help="output folder (default ./plots)")
-    p.add_argument("--dpi", type=int, default=150)
+    p.add_argument("--dpi", type=int, default=150, help="pixels per inch, 10..1200 (default 150)")
     p.set_defaults(func=cmd_plot)
     return p
 
 
 def cmd_plot(args) -> int:
     """Run ``stratawalk plot``: write the figures and print where they are."""
+    from planner.errors import InputError
+    from planner.outputs import check_folder
+
+    if not 10 <= args.dpi <= 1200:
+        raise InputError(f"--dpi: expected 10..1200 pixels per inch, got {args.dpi}")
+    check_folder(args.out, "--out")
     for path in plot_plan(args.plan, args.out, dpi=args.dpi):
         print(f"wrote {path}")
     return 0

@@ -12,6 +12,7 @@ load by name from its share folder.
 
 from __future__ import annotations
 
+import math
 import sys
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
@@ -189,6 +190,8 @@ def _fail(path: Path, what: str) -> RobotModelError:
 def _parse_urdf_xml(path: Path) -> ET.Element:
     try:
         return ET.parse(path).getroot()
+    except OSError as exc:
+        raise _fail(path, f"cannot read it ({exc.strerror}); give an existing URDF") from None
     except ET.ParseError as exc:
         raise _fail(path, f"malformed URDF XML ({exc}); fix the XML") from None
 
@@ -199,6 +202,7 @@ def _build_model(path: Path) -> pin.Model:
     root = _parse_urdf_xml(path)
     if root.tag != "robot":
         raise _fail(path, f"root element is <{root.tag}>, a URDF needs <robot>")
+    _check_link_masses(path, root)
     try:
         return pin.buildModelFromUrdf(str(path), pin.JointModelFreeFlyer())
     except (RuntimeError, ValueError) as exc:
@@ -272,6 +276,44 @@ def _foot_frame(path: Path, model: pin.Model, data: pin.Data, knee_id: int) -> i
     return same[0]
 
 
+def _check_link_masses(path: Path, root) -> None:
+    """Refuse a link mass that is negative or not a finite number.
+
+    Checked before Pinocchio, whose URDF parser would print its own multi-line complaint
+    or take the number.
+    """
+    for link in root.iter("link"):
+        for mass in link.iter("mass"):
+            try:
+                value = float(mass.get("value", "nan"))
+            except ValueError:
+                value = math.nan
+            if not (math.isfinite(value) and value >= 0.0):
+                raise _fail(
+                    path,
+                    f"link {link.get('name')!r}: <mass value={mass.get('value')!r}>; "
+                    "give a finite mass >= 0 in kg",
+                )
+
+
+def _check_mass_and_limits(path: Path, model: pin.Model) -> None:
+    """Refuse a robot of no mass, or a joint whose lower limit is not below its upper."""
+    total = float(sum(inert.mass for inert in model.inertias))
+    if not total > 0.0:
+        raise _fail(path, f"total mass {total:g} kg; give the links their <mass value> in kg")
+    for i in range(2, model.njoints):  # joint 1 is the free-flyer
+        j = model.joints[i]
+        if j.nq != 1:
+            continue
+        lo, hi = model.lowerPositionLimit[j.idx_q], model.upperPositionLimit[j.idx_q]
+        if not lo < hi:
+            raise _fail(
+                path,
+                f"joint {model.names[i]!r}: <limit lower={lo:g} upper={hi:g}>; the lower limit "
+                "must be below the upper (swapped?)",
+            )
+
+
 def load_robot(name_or_path: str | Path, foot_radius_m: float | None = None) -> Robot:
     """Load a quadruped by name (``littledog``, ``solo12``, ...) or from a URDF path.
 
@@ -281,6 +323,7 @@ def load_robot(name_or_path: str | Path, foot_radius_m: float | None = None) -> 
     name, path = resolve_urdf(name_or_path)
     model = _build_model(path)
     root = _parse_urdf_xml(path)
+    _check_mass_and_limits(path, model)
     data = model.createData()
     q0 = pin.neutral(model)
     pin.forwardKinematics(model, data, q0)

@@ -109,6 +109,7 @@ DEFAULT_SMOOTHING_M = 0.005
 DEFAULT_FRICTION = 0.7
 DEFAULT_X_MIN = -0.5
 DEFAULT_Y_MIN = -0.6
+MAX_EXTENT_M = 10_000.0  # |x_min|, |y_min|, |y_max| and length at most this [m]
 DEFAULT_Y_MAX = 0.6
 _COMPLEX_STEP = 1e-30
 _CHUNK = 20000
@@ -980,10 +981,12 @@ class Terrain:
                 "kind",
                 f"unknown kind {kind!r}; use one of: {', '.join(sorted([*KINDS, 'course']))}",
             )
-        x_min = top.number("x_min", None)
-        length = top.number("length", None, lo=0.0, lo_open=True)
-        y_min = top.number("y_min", DEFAULT_Y_MIN)
-        y_max = top.number("y_max", DEFAULT_Y_MAX)
+        # a course lies within 10 km of the origin and is at most 10 km long: a quasi-static
+        # walker covers a few cm/s, and numbers past that are typing errors (1e300)
+        x_min = top.number("x_min", None, lo=-MAX_EXTENT_M, hi=MAX_EXTENT_M, hint="metres")
+        length = top.number("length", None, lo=0.0, lo_open=True, hi=MAX_EXTENT_M)
+        y_min = top.number("y_min", DEFAULT_Y_MIN, lo=-MAX_EXTENT_M, hi=MAX_EXTENT_M)
+        y_max = top.number("y_max", DEFAULT_Y_MAX, lo=-MAX_EXTENT_M, hi=MAX_EXTENT_M)
         if y_max <= y_min:
             raise top.fail("y_max", f"must be > y_min ({y_min}), got {y_max}; change it")
         self._segments: list[tuple[float, _Kind]] = []

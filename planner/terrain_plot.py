@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import matplotlib
@@ -11,7 +12,10 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from planner.outputs import write_atomic  # noqa: E402
 from planner.terrain import Terrain  # noqa: E402
+
+MAX_PIXELS = 4_000_000  # the height image's cells at most (the grid coarsens beyond)
 
 
 def plot_top_view(
@@ -31,7 +35,8 @@ def plot_top_view(
     bounds
         ``(xmin, xmax, ymin, ymax)`` in metres; default ``terrain.bounds``.
     resolution
-        Grid spacing in metres (one pixel of the height image).
+        Grid spacing in metres (one pixel of the height image); coarser on a course so
+        large that the image would pass :data:`MAX_PIXELS`.
 
     Returns
     -------
@@ -40,6 +45,7 @@ def plot_top_view(
 
     """
     x0, x1, y0, y1 = terrain.bounds if bounds is None else bounds
+    resolution = max(resolution, math.sqrt((x1 - x0) * (y1 - y0) / MAX_PIXELS))
     origin, res, heights = terrain.height_grid(x0, x1, y0, y1, resolution)
     ny, nx = heights.shape
     extent = (
@@ -70,9 +76,9 @@ def plot_top_view(
         ax.set_ylabel("y [m]")
         ax.set_aspect("equal")
         ax.set_title(f"{terrain.name} ({terrain.kind}, sharp heights, {res * 1000:.3g} mm grid)")
-        out = Path(path_png)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(out, dpi=120, bbox_inches="tight")
+        out = write_atomic(
+            path_png, lambda tmp: fig.savefig(tmp, dpi=120, bbox_inches="tight", format="png")
+        )
     finally:
         plt.close(fig)
     return out

@@ -8,6 +8,8 @@ Checks (``Violation.kind``), at every sample unless marked keyframe:
 
 ``robot_mismatch``
     The URDF's joint names, foot frames or foot radius differ from the file's.
+``empty_plan``
+    Fewer than two samples, or no keyframe: nothing a robot could execute.
 ``time_order``
     ``samples.time`` decreases.
 ``keyframe_fk`` (keyframes)
@@ -459,6 +461,14 @@ class _Checker:
         return np.array([self.data.oMf[i].translation for i in self.foot_ids]), np.array(com)
 
     # ---- file-level ------------------------------------------------------------------
+    def not_empty(self) -> None:
+        n, k = len(self.plan.samples), len(self.plan.keyframes)
+        if n < 2:
+            self.add("empty_plan", "plan", None, float(n), 2.0,
+                     f"{n} samples; a motion needs at least 2")  # fmt: skip
+        if k < 1:
+            self.add("empty_plan", "plan", None, 0.0, 1.0, "no keyframes; a plan has at least 1")
+
     def robot_consistency(self) -> None:
         r, info = self.robot, self.plan.robot
         for key, mine in (("joint_names", r.joint_names), ("foot_frames", r.foot_frames)):
@@ -907,7 +917,7 @@ def _joint_torques(ck: _Checker, contacts: _Array, report: CheckReport) -> None:
 def _order(v: Violation) -> tuple[int, int]:
     """Sort key: robot, then keyframes, then samples, each by index (stable within)."""
     head, _, index = v.where.partition(" ")
-    group = {"robot": 0, "keyframe": 1, "sample": 2}.get(head, 3)
+    group = {"plan": 0, "robot": 0, "keyframe": 1, "sample": 2}.get(head, 3)
     return group, int(index) if index.isdigit() else -1
 
 
@@ -939,6 +949,7 @@ def check_plan(plan: Plan, tolerances: CheckTolerances | None = None) -> CheckRe
     report = CheckReport(
         n_samples=len(plan.samples), n_keyframes=len(plan.keyframes), tolerances=tol
     )
+    ck.not_empty()
     ck.robot_consistency()
     ck.keyframes()
     ck.samples(report)
@@ -947,8 +958,20 @@ def check_plan(plan: Plan, tolerances: CheckTolerances | None = None) -> CheckRe
     return report
 
 
-def main_check(path: str | Path, out: IO[str] | None = None, err: IO[str] | None = None) -> int:
-    """``stratawalk check PATH``: print each violation and a summary.
+MAX_PRINTED = 50  # violations printed one per line; the rest are counted by kind
+
+
+def main_check(
+    path: str | Path,
+    out: IO[str] | None = None,
+    err: IO[str] | None = None,
+    robot: str | Path | None = None,
+    show_all: bool = False,
+) -> int:
+    """``stratawalk check PATH``: print the violations and a summary.
+
+    The first :data:`MAX_PRINTED` violations are printed unless ``show_all``. ``robot``: a
+    URDF for the plan's robot (its own path moved).
 
     Returns
     -------
@@ -960,12 +983,19 @@ def main_check(path: str | Path, out: IO[str] | None = None, err: IO[str] | None
     out = sys.stdout if out is None else out
     err = sys.stderr if err is None else err
     try:
-        plan = Plan.load(path)
+        plan = Plan.load(path, robot=robot)
         report = check_plan(plan)
     except PlannerError as exc:
         print(f"stratawalk check: error: {exc}", file=err)
         return 2
-    for v in report.violations:
+    shown = report.violations if show_all else report.violations[:MAX_PRINTED]
+    for v in shown:
         print(v, file=out)
+    if len(shown) < len(report.violations):
+        print(
+            f"... and {len(report.violations) - len(shown)} more violations (--all prints "
+            "every one; the counts by kind are in the summary)",
+            file=out,
+        )
     print(f"{path}: {report.summary()}", file=out)
     return 0 if report.ok else 1

@@ -74,7 +74,7 @@ def test_the_executor_runs_an_export_as_it_runs_the_plan(plan, csv_traj):
     "args, expect",
     [
         (["--rate", "-5", "--out", "{d}/a.csv"], "--rate: must be a number"),
-        (["--rate", "500", "--out", "{d}/a.txt"], "give a .csv or .npz"),
+        (["--rate", "500", "--out", "{d}/a.txt"], "ending in .csv or .npz"),
         (["--rate", "500", "--out", "{d}"], "is a folder"),
     ],
 )

@@ -6,6 +6,8 @@ import argparse
 import signal
 import time
 
+from planner.outputs import check_file
+from planner.plan import ROBOT_HELP
 from planner.replay.page import write_html
 from planner.replay.scene import GEOMETRIES, build_scene
 from planner.replay.server import DEFAULT_HOST, ReplayServer, check_host
@@ -45,6 +47,7 @@ def add_replay_parser(subparsers) -> argparse.ArgumentParser:
         "plan under its execution: `replay exec.json --compare plan.json` after "
         "`simulate plan.json --out exec.json`",
     )
+    p.add_argument("--robot", metavar="URDF", help=ROBOT_HELP)
     p.set_defaults(func=cmd_replay)
     return p
 
@@ -54,8 +57,10 @@ def cmd_replay(args) -> int:
     from planner.plan import Plan
 
     host = None if args.html else check_host(args.host, args.allow_remote)
-    plan = Plan.load(args.plan)
-    compare = None if args.compare is None else Plan.load(args.compare)
+    if args.html is not None:
+        check_file(args.html, "--html", suffixes=(".html", ".htm"))
+    plan = Plan.load(args.plan, robot=args.robot)
+    compare = None if args.compare is None else Plan.load(args.compare, robot=args.robot)
     options = dict(
         speed=args.speed, geometry=args.geometry, follow=not args.fixed_camera, compare=compare
     )

@@ -13,10 +13,10 @@ import functools
 import gzip
 import html
 import json
-import os
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from planner.outputs import check_file, write_atomic
 from planner.replay.scene import (
     COM_RGB,
     COMPARE_RGBA,
@@ -202,15 +202,8 @@ def write_html(
     scene = build_scene(
         plan, series, speed=speed, geometry=geometry, follow=follow, compare=compare
     )
-    out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(f".{out.name}.tmp{os.getpid()}")
-    try:
-        tmp.write_text(scene_html(scene, autoplay, title=f"stratawalk: {plan.source}"), "utf-8")
-        os.replace(tmp, out)
-    finally:
-        tmp.unlink(missing_ok=True)
-    return out
+    page = scene_html(scene, autoplay, title=f"stratawalk: {plan.source}")
+    return write_atomic(check_file(path, "--html"), lambda tmp: tmp.write_text(page, "utf-8"))
 
 
 def notebook_html(scene: Scene | Plan, height: int = 480, speed: float = 4.0):
