@@ -48,14 +48,16 @@ import sys
 import time
 import traceback
 from collections.abc import Callable, Iterable
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import yaml
 
+from planner import interrupts
 from planner.errors import InputError
+from planner.interrupts import Interrupts
 from planner.outputs import check_folder
 
 __all__ = [
@@ -440,16 +442,27 @@ def run_pool(
     ctx = mp.get_context("spawn")  # fresh interpreters: no forked CasADi/IPOPT/MuJoCo state
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_ignore_sigint)
     futs = {pool.submit(func, j): j for j in jobs}
+    pending = set(futs)
     try:
-        for fut in as_completed(futs):
-            try:
-                yield fut.result()
-            except Exception as exc:  # e.g. a worker process died
-                yield error_record(futs[fut], exc)
+        while pending:
+            done, pending = wait(pending, timeout=0.25, return_when=FIRST_COMPLETED)
+            for fut in done:
+                try:
+                    yield fut.result()
+                except Exception as exc:  # e.g. a worker process died
+                    yield error_record(futs[fut], exc)
+            interrupts.check()  # Ctrl-C / SIGTERM under planner.interrupts: stop here
     except BaseException:  # Ctrl-C or the consumer stopped: drop the running jobs
+        # the workers, taken before shutdown() forgets them (it sets _processes to None)
+        procs = list((getattr(pool, "_processes", None) or {}).values())
         pool.shutdown(wait=False, cancel_futures=True)
-        for proc in list((getattr(pool, "_processes", None) or {}).values()):
+        for proc in procs:
             proc.terminate()
+        for proc in procs:  # none outlives the batch: SIGKILL after 5 s
+            proc.join(5.0)
+            if proc.is_alive():
+                proc.kill()
+                proc.join(5.0)
         raise
     pool.shutdown(wait=True)
 
@@ -575,15 +588,18 @@ def cmd_batch(args) -> int:
         raise InputError(f"--workers: must be >= 1, got {args.workers}")
     check_folder(args.out, "--out")
     jobs = load_scenarios(args.scenarios)
-    s = run_batch(
-        jobs,
-        args.out,
-        scheduler=args.scheduler,
-        workers=args.workers,
-        retry_errors=args.retry_errors,
-        save_plans=args.save_plans,
-        progress=not args.quiet,
-    )
+    # Ctrl-C / SIGTERM: the running jobs are dropped, their workers stopped, every record
+    # written stays; a second signal waits for that (exit 130 / 143)
+    with Interrupts(cooperative=args.scheduler is None) as stop:
+        s = run_batch(
+            jobs,
+            args.out,
+            scheduler=args.scheduler,
+            workers=args.workers,
+            retry_errors=args.retry_errors,
+            save_plans=args.save_plans,
+            progress=not args.quiet,
+        )
     recs = [s.records[job_id(j)] for j in jobs if job_id(j) in s.records]
     reached = sum(bool(r.get("reached")) for r in recs)
     errors = sum(r.get("status") != "ok" for r in recs)
@@ -593,5 +609,5 @@ def cmd_batch(args) -> int:
         + ("; interrupted: rerun the same command to resume" if s.interrupted else "")
     )
     if s.interrupted:
-        return 130
+        return stop.exit_code or 130
     return 0 if errors == 0 and len(recs) == s.total else 1

@@ -126,6 +126,7 @@ def _cmd_plan(args) -> int:
     import time
     from dataclasses import replace
 
+    from planner.interrupts import Interrupts
     from planner.outputs import check_file
     from planner.robot import load_robot
     from planner.settings import effective
@@ -149,9 +150,15 @@ def _cmd_plan(args) -> int:
     check_file(args.out, "--out")
     t0 = time.perf_counter()
     total = float(np.hypot(goal[0] - start[0], goal[1] - start[1]))
+    furthest = [0.0]
 
     def progress(dist_m: float, steps: int) -> None:
-        done = max(0.0, min(1.0, 1 - dist_m / max(total, 1e-9)))
+        # the furthest the COM has come towards the goal: monotone, though a step may
+        # take the COM back a little (e.g. over a more centred support)
+        furthest[0] = max(furthest[0], min(1.0, 1 - dist_m / max(total, 1e-9)))
+        if args.quiet:
+            return
+        done = furthest[0]
         bar = "#" * int(30 * done)
         print(
             f"\r[{bar:<30}] {100 * done:5.1f}%  {steps} steps  {time.perf_counter() - t0:6.1f} s",
@@ -160,19 +167,25 @@ def _cmd_plan(args) -> int:
             flush=True,
         )
 
-    if getattr(args, "global_plan", False):  # section 9: CMA-ES over tau, planner/global_plan.py
-        from planner.global_plan import GlobalSettings, plan_global_walk, print_progress
+    # Ctrl-C / SIGTERM: the plan so far is saved, exit 130 / 143 (global planning waits on a
+    # pool's map, so there the signal interrupts at once)
+    with Interrupts(cooperative=not args.global_plan) as stop:
+        if getattr(args, "global_plan", False):  # section 9: CMA-ES over tau
+            from planner.global_plan import GlobalSettings, plan_global_walk, print_progress
 
-        gs = GlobalSettings(terms=args.terms, max_generations=args.generations, seed=user.seed)
-        plan, report = plan_global_walk(
-            args.robot, terrain, goal, start, args.planner, settings, gs, print_progress, user.mu
-        )
-    else:
-        plan, report = plan_walk(
-            robot, terrain, goal, start, args.planner, settings, progress=progress, mu=user.mu
-        )
-    print(file=sys.stderr)
-    path = plan.save(args.out)
+            gs = GlobalSettings(terms=args.terms, max_generations=args.generations, seed=user.seed)
+            plan, report = plan_global_walk(
+                args.robot, terrain, goal, start, args.planner, settings, gs,
+                None if args.quiet else print_progress, user.mu,
+            )  # fmt: skip
+        else:
+            plan, report = plan_walk(
+                robot, terrain, goal, start, args.planner, settings, progress=progress, mu=user.mu
+            )
+        if not args.quiet:
+            print(file=sys.stderr)
+        with stop.shielded():
+            path = plan.save(args.out)
     o = plan.outcome
     print(
         f"wrote {path}: {len(plan.keyframes)} keyframes, {len(plan.samples.time)} samples, "
@@ -181,6 +194,8 @@ def _cmd_plan(args) -> int:
     )
     print(f"validation: {'ok' if report.ok else report.summary()}")
     print(("" if o["reached_goal"] else "goal NOT reached: ") + o["message"])
+    if stop.exit_code is not None:
+        return stop.exit_code
     return 0 if o["reached_goal"] else 1
 
 
@@ -243,9 +258,16 @@ def _cmd_export(args) -> int:
     return 0
 
 
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line (no usage block), exit status 2."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """Argument parser of the ``stratawalk`` command."""
-    p = argparse.ArgumentParser(prog="stratawalk", description=__doc__)
+    p = _Parser(prog="stratawalk", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True)
     r = sub.add_parser("robot", help="summary of a robot: legs, joints, limits, masses, reach")
     r.add_argument("robot", help="littledog, an example-robot-data name, or a URDF path")
@@ -274,6 +296,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--print-config", action="store_true", help="print the settings in force and exit"
     )
     pl.add_argument("--out", default="plan.json")
+    pl.add_argument("--quiet", action="store_true", help="no progress bar")
     pl.add_argument(
         "--jit",
         action="store_true",

@@ -31,6 +31,7 @@ purpose, to check that the simulator notices a centre of mass outside the suppor
 from __future__ import annotations
 
 import math
+import sys
 import time as _time
 from dataclasses import dataclass
 from pathlib import Path
@@ -48,6 +49,7 @@ from planner.simulate import (
     cycle_starts,
     finish_run,
     new_run,
+    reporting_progress,
     run_open_loop,
 )
 
@@ -230,67 +232,70 @@ def run_feedback(
     step_scale = {i: 1.0 for i in range(4)}
     fails, cycles, steps, best, best_at = 0, 0, 0, math.inf, 0
     m = ex.monitor.metrics
-    while True:
-        state = measured_state(robot, terrain, src.measure())
-        dist = float(np.linalg.norm(local.check.com_W(state)[:2] - goal))
-        if dist < best - 0.01:
-            best, best_at = dist, cycles
-        if ex.stopped:
-            message = f"fell at {m.fall_time_s:.1f} s ({m.fall_reason})"
-            break
-        if dist <= st.goal_tol_m:
-            message = f"reached the goal: measured COM {100 * dist:.1f} cm from it"
-            break
-        if cycles >= max_cycles:
-            message = f"stopped after {cycles} cycles (max_cycles)"
-            break
-        if fails >= st.max_fails_in_row:
-            message = f"stuck: {fails} failed step attempts in a row"
-            break
-        if cycles - best_at >= no_progress_cycles:
-            message = (
-                f"no progress in {no_progress_cycles} cycles (COM {100 * dist:.0f} cm from goal)"
-            )
-            break
-        # one cycle of the soft planner (SoftPlanner._run), from the measured state
-        cycles += 1
-        leg = queue.pop()
-        # back off before giving a leg up: shorter steps over a more centred body (8.5's
-        # ambitions); a failed body move leaves the robot standing where it was measured
-        for frac, shrink in BACKOFF:
-            step = local.step(state, leg, tau, local.stride_m() * step_scale[leg] * frac, shrink)
-            if step.ok:
+    try:
+        while True:
+            state = measured_state(robot, terrain, src.measure())
+            dist = float(np.linalg.norm(local.check.com_W(state)[:2] - goal))
+            if dist < best - 0.01:
+                best, best_at = dist, cycles
+            if ex.stopped:
+                message = f"fell at {m.fall_time_s:.1f} s ({m.fall_reason})"
                 break
-        if step.ok:
-            step_scale[leg] = 1.0
-            fails = 0
-            steps += 1
-            queue.push(leg)
-        else:
-            if step.phase == "foot_placement":
-                step_scale[leg] = max(step_scale[leg] * 0.5, st.min_step_fraction)
-            fails += 1
-            queue.swap(leg, fails)
-            m.replans += 1
-            where = step.moved if step.moved is not None else state
-            local._log_failure(cycles, leg, step.phase, where, step.diagnosis)
-        if step.moved is None:
-            continue  # the body move failed: nothing to execute
-        body_s = float(np.linalg.norm(step.moved.base_position_W - state.base_position_W))
-        body_s = max(body_s / st.body_speed_m_s, 0.2)
-        swing = step.swing_path if step.ok else []
-        path = list(step.body_path) + list(swing[1:])
-        times = _path_times(len(step.body_path), len(swing), body_s, st.swing_time_s)
-        q = np.array(
-            [robot.q_from(s.base_position_W, s.base_quaternion_xyzw, s.joints_rad) for s in path]
-        )
-        contact = np.array([contact_mask(s.stratum) for s in path])
-        q = blend_in(robot, q, contact, times, sim.targets())
-        ex.monitor.keyframe(0)
-        m.cycles += 1
-        if not ex.follow(times, q, contact):
-            message = f"fell at {m.fall_time_s:.1f} s ({m.fall_reason})"
-            break
+            if dist <= st.goal_tol_m:
+                message = f"reached the goal: measured COM {100 * dist:.1f} cm from it"
+                break
+            if cycles >= max_cycles:
+                message = f"stopped after {cycles} cycles (max_cycles)"
+                break
+            if fails >= st.max_fails_in_row:
+                message = f"stuck: {fails} failed step attempts in a row"
+                break
+            if cycles - best_at >= no_progress_cycles:
+                message = f"no progress in {no_progress_cycles} cycles "
+                message += f"(COM {100 * dist:.0f} cm from goal)"
+                break
+            # one cycle of the soft planner (SoftPlanner._run), from the measured state
+            cycles += 1
+            leg = queue.pop()
+            # back off before giving a leg up: shorter steps over a more centred body (8.5's
+            # ambitions); a failed body move leaves the robot standing where it was measured
+            for frac, shrink in BACKOFF:
+                stride = local.stride_m() * step_scale[leg] * frac
+                step = local.step(state, leg, tau, stride, shrink)
+                if step.ok:
+                    break
+            if step.ok:
+                step_scale[leg] = 1.0
+                fails = 0
+                steps += 1
+                queue.push(leg)
+            else:
+                if step.phase == "foot_placement":
+                    step_scale[leg] = max(step_scale[leg] * 0.5, st.min_step_fraction)
+                fails += 1
+                queue.swap(leg, fails)
+                m.replans += 1
+                where = step.moved if step.moved is not None else state
+                local._log_failure(cycles, leg, step.phase, where, step.diagnosis)
+            if step.moved is None:
+                continue  # the body move failed: nothing to execute
+            body_s = float(np.linalg.norm(step.moved.base_position_W - state.base_position_W))
+            body_s = max(body_s / st.body_speed_m_s, 0.2)
+            swing = step.swing_path if step.ok else []
+            path = list(step.body_path) + list(swing[1:])
+            times = _path_times(len(step.body_path), len(swing), body_s, st.swing_time_s)
+            q = np.array([robot.q_from(p.base_position_W, p.base_quaternion_xyzw, p.joints_rad)
+                          for p in path])  # fmt: skip
+            contact = np.array([contact_mask(s.stratum) for s in path])
+            q = blend_in(robot, q, contact, times, sim.targets())
+            ex.monitor.keyframe(0)
+            m.cycles += 1
+            if not ex.follow(times, q, contact):
+                message = f"fell at {m.fall_time_s:.1f} s ({m.fall_reason})"
+                break
+    except KeyboardInterrupt:
+        ex.interrupt()
+        message = m.message
     m.message = message
     extra = {
         "feedback": {
@@ -417,23 +422,26 @@ def run_corrected(
     lifts = {k for k in range(1, len(s) - 1) if allc[k] and not allc[k + 1]}
     starts = sorted(cycles | lifts | {len(s) - 1})
     m = ex.monitor.metrics
-    for a, b in zip(starts[:-1], starts[1:], strict=True):
-        meas = src.measure()
-        q, misses = correct_cycle(
-            robot,
-            s.q[a : b + 1],
-            s.contact[a : b + 1],
-            centres[a : b + 1],
-            meas,
-            s.time[a : b + 1],
-            sim.targets(),
-        )
-        m.ik_misses += misses
-        if a in cycles:
-            ex.monitor.keyframe(0)
-            m.cycles += 1
-        if not ex.follow(s.time[a : b + 1], q, s.contact[a : b + 1]):
-            break
+    try:
+        for a, b in zip(starts[:-1], starts[1:], strict=True):
+            meas = src.measure()
+            q, misses = correct_cycle(
+                robot,
+                s.q[a : b + 1],
+                s.contact[a : b + 1],
+                centres[a : b + 1],
+                meas,
+                s.time[a : b + 1],
+                sim.targets(),
+            )
+            m.ik_misses += misses
+            if a in cycles:
+                ex.monitor.keyframe(0)
+                m.cycles += 1
+            if not ex.follow(s.time[a : b + 1], q, s.contact[a : b + 1]):
+                break
+    except KeyboardInterrupt:
+        ex.interrupt()
     return finish_run(plan, ex, wall0, t0)
 
 
@@ -531,12 +539,22 @@ def add_simulate_parser(subparsers) -> Any:
         help="execute this `stratawalk export` file (CSV or npz) of the plan, open loop",
     )
     p.add_argument("--robot", metavar="URDF", help=ROBOT_HELP)
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_simulate)
     return p
 
 
 def cmd_simulate(args) -> int:
-    """Run ``stratawalk simulate``; exit 0 when the run is OK, 1 otherwise."""
+    """Run ``stratawalk simulate``; exit 0 when the run is OK, 1 otherwise.
+
+    Ctrl-C or SIGTERM stop the run: the motion so far is judged and written (``--out``),
+    exit 130 / 143 (:mod:`planner.interrupts`).
+    """
+    from planner.interrupts import Interrupts
+    from planner.outputs import check_file
+
+    if args.out:
+        check_file(args.out, "--out")
     plan = Plan.load(args.plan, robot=args.robot)
     settings = SimSettings(
         time_scale=args.time_scale, timestep_s=args.timestep, feedforward=not args.no_feedforward
@@ -557,11 +575,43 @@ def cmd_simulate(args) -> int:
         if mode != "open":
             raise InputError("--trajectory: executes open loop; drop --feedback/--correct")
         traj = load_trajectory(args.trajectory)
-        res = run_open_loop(plan_from_trajectory(plan, traj), settings, traj.torque_ff)
-    else:
-        res = simulate_plan(plan, mode, settings, **kwargs)
-    print(res.metrics.summary())
-    if args.out:
-        path = res.executed.save(args.out)
-        print(f"wrote {path}: {len(res.executed.samples)} executed samples")
+    bar = None if args.quiet else _progress_bar(plan)
+    with Interrupts() as stop, reporting_progress(bar):
+        if args.trajectory:
+            res = run_open_loop(plan_from_trajectory(plan, traj), settings, traj.torque_ff)
+        else:
+            res = simulate_plan(plan, mode, settings, **kwargs)
+        if bar is not None:
+            print(file=sys.stderr)
+        print(res.metrics.summary())
+        if args.out:
+            with stop.shielded():
+                path = res.executed.save(args.out)
+            print(f"wrote {path}: {len(res.executed.samples)} executed samples")
+    if stop.exit_code is not None:
+        return stop.exit_code
     return 0 if res.metrics.ok else 1
+
+
+def _progress_bar(plan: Plan):
+    """A ``progress(sim)`` that prints a bar of the simulated walk.
+
+    The bar is how far the COM has come towards the plan's goal (the furthest so far:
+    monotone), with the simulated time; at most twice a second.
+    """
+    start, goal = plan.start[:2], plan.goal[:2]
+    total = max(float(np.linalg.norm(goal - start)), 1e-9)
+    state = {"done": 0.0, "shown": 0.0}
+
+    def progress(sim) -> None:
+        now = _time.monotonic()
+        if now - state["shown"] < 0.5:
+            return
+        state["shown"] = now
+        dist = float(np.linalg.norm(sim.com_W()[:2] - goal))
+        state["done"] = max(state["done"], min(1.0, 1.0 - dist / total))
+        bar = "#" * int(30 * state["done"])
+        print(f"\r[{bar:<30}] {100 * state['done']:5.1f}%  simulated {sim.time:6.1f} s",
+              end="", file=sys.stderr, flush=True)  # fmt: skip
+
+    return progress

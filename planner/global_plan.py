@@ -55,6 +55,7 @@ from pathlib import Path
 import numpy as np
 
 from planner.errors import InputError, NoSolutionFound, PlannerError
+from planner.interrupts import shielded
 from planner.local.base import LocalSettings
 from planner.settings import effective
 from planner.trajectory import Trajectory
@@ -336,7 +337,10 @@ def _evaluate(a_m: list[float], generation: int = 0):
         "tau": {"kind": tau.kind, "coefficients_m": list(a_m)},
         "settings": effective(local, pb.seed),
     }
-    plan, report = assemble_plan(robot, terrain, local.mu, pb.start_xy, pb.goal_xy, result, extra)
+    with shielded():
+        plan, report = assemble_plan(
+            robot, terrain, local.mu, pb.start_xy, pb.goal_xy, result, extra
+        )
     reached = bool(plan.outcome["reached_goal"])
     margin = stability_margin_m(robot, local.check, result.keyframes)
     metrics = {
@@ -476,9 +480,10 @@ def plan_global_walk(
             elif es.stop():
                 stop = "CMA-ES: " + ", ".join(es.stop())
     except KeyboardInterrupt:
-        stop = f"interrupted (Ctrl-C) in generation {generation}; the best plan so far is kept"
+        stop = f"interrupted in generation {generation}; the best plan so far is kept"
+        procs = list((getattr(pool, "_processes", None) or {}).values())  # before shutdown
         pool.shutdown(wait=False, cancel_futures=True)
-        for proc in list((getattr(pool, "_processes", None) or {}).values()):
+        for proc in procs:
             proc.terminate()
         if best is None:
             raise

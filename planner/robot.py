@@ -12,9 +12,13 @@ load by name from its share folder.
 
 from __future__ import annotations
 
+import contextlib
 import math
+import os
 import sys
+import tempfile
 import xml.etree.ElementTree as ET
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -203,11 +207,30 @@ def _build_model(path: Path) -> pin.Model:
     if root.tag != "robot":
         raise _fail(path, f"root element is <{root.tag}>, a URDF needs <robot>")
     _check_link_masses(path, root)
-    try:
-        return pin.buildModelFromUrdf(str(path), pin.JointModelFreeFlyer())
-    except (RuntimeError, ValueError) as exc:
-        msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise _fail(path, f"Pinocchio could not read it: {msg}") from None
+    with _c_stderr() as said:  # urdfdom writes its complaints straight to fd 2
+        try:
+            return pin.buildModelFromUrdf(str(path), pin.JointModelFreeFlyer())
+        except (RuntimeError, ValueError) as exc:
+            msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+    why = next((ln.split("Error:", 1)[1].strip() for ln in said if "Error:" in ln), None)
+    raise _fail(path, f"Pinocchio could not read it: {why or msg}")
+
+
+@contextlib.contextmanager
+def _c_stderr() -> Iterator[list[str]]:
+    """Capture what C/C++ code writes to file descriptor 2 in the block (its lines)."""
+    lines: list[str] = []
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as tmp:
+        os.dup2(tmp.fileno(), 2)
+        try:
+            yield lines
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            tmp.seek(0)
+            lines += tmp.read().decode("utf-8", "replace").splitlines()
 
 
 def _link_geometry(root: ET.Element, link: str) -> list[tuple[str, dict, np.ndarray]]:

@@ -31,11 +31,14 @@ two apart: ``max_slip_m`` (the centre's travel since touchdown) and ``max_slidin
 
 from __future__ import annotations
 
+import contextlib
 import math
 import re
 import tempfile
 import time as _time
 import xml.etree.ElementTree as ET
+from collections.abc import Callable, Iterator
+from contextvars import ContextVar
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -43,6 +46,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+from planner import interrupts
 from planner.errors import InputError
 from planner.plan import Keyframe, Plan, Samples, TerrainGrid
 from planner.torques import TorqueCheck, holding_load
@@ -870,6 +874,21 @@ class Monitor:
 
 
 # ------------------------------------------------------------------------------ execution
+_progress: ContextVar[Callable[[Simulator], None] | None] = ContextVar(
+    "stratawalk_simulation_progress", default=None
+)
+
+
+@contextlib.contextmanager
+def reporting_progress(callback: Callable[[Simulator], None] | None) -> Iterator[None]:
+    """Runs started in the block call ``callback(simulator)`` every 50 control ticks."""
+    token = _progress.set(callback)
+    try:
+        yield
+    finally:
+        _progress.reset(token)
+
+
 class Execution:
     """Drive a :class:`Simulator` through reference segments with a :class:`Monitor`.
 
@@ -882,6 +901,15 @@ class Execution:
         self.monitor = monitor
         self.clock = sim.time
         self._last_contact: NDArray[np.bool_] | None = None
+        self.interrupted = False  # Ctrl-C or SIGTERM stopped the run (planner.interrupts)
+        self.progress = _progress.get()  # called with the simulator now and then
+
+    def interrupt(self) -> None:
+        """Stop here (Ctrl-C or SIGTERM): the motion so far is kept and judged."""
+        self.interrupted = True
+        self.monitor.metrics.message = (
+            f"interrupted at {self.sim.time:.1f} s of simulated time; the motion so far is kept"
+        )
 
     @property
     def stopped(self) -> bool:
@@ -913,11 +941,17 @@ class Execution:
     def _run_until(self, end: float) -> bool:
         sim, mon = self.sim, self.monitor
         half = 0.5 * sim.settings.control_dt_s
+        ticks = 0
         while sim.time < end - half and not self.stopped:
             joints, _, _, _ = mon.reference_at(sim.time + half)
             sim.set_targets(joints, mon.feedforward_at(sim.time + half))
             sim.tick()
             mon.update()
+            ticks += 1
+            if ticks % 50 == 0:
+                interrupts.check()  # Ctrl-C / SIGTERM: stop here (planner.interrupts)
+                if self.progress is not None:
+                    self.progress(sim)
         self.clock = max(self.clock, end)
         return not self.stopped
 
@@ -975,14 +1009,17 @@ def finish_run(
     plan: Plan, ex: Execution, wall0: float, t0: float, extra: dict | None = None
 ) -> SimResult:
     """Hold the last set-point, close the metrics, build the executed plan."""
+    from planner.interrupts import shielded
+
     sim, mon = ex.sim, ex.monitor
-    if not ex.stopped:
-        ex.hold(sim.settings.hold_s)
-    mon.finish(plan, _time.perf_counter() - wall0, t0)
-    m = mon.metrics
-    if not m.message:
-        m.message = _verdict(m)
-    executed = executed_plan(plan, mon, sim.settings, extra)
+    with shielded():  # a second Ctrl-C does not lose the run
+        if not ex.stopped and not ex.interrupted:
+            ex.hold(sim.settings.hold_s)
+        mon.finish(plan, _time.perf_counter() - wall0, t0)
+        m = mon.metrics
+        if not m.message:
+            m.message = _verdict(m)
+        executed = executed_plan(plan, mon, sim.settings, extra)
     return SimResult(m, executed, sim.settings)
 
 
@@ -1049,10 +1086,13 @@ def run_open_loop(
     t0 = sim.time
     s = plan.samples
     starts = sorted(set(cycle_starts(s.contact)) | {len(s) - 1})
-    for a, b in zip(starts[:-1], starts[1:], strict=True):
-        ex.monitor.keyframe(0)
-        ex.monitor.metrics.cycles += 1
-        ff = None if torque_ff is None else torque_ff[a : b + 1]
-        if not ex.follow(s.time[a : b + 1], s.q[a : b + 1], s.contact[a : b + 1], ff):
-            break
+    try:
+        for a, b in zip(starts[:-1], starts[1:], strict=True):
+            ex.monitor.keyframe(0)
+            ex.monitor.metrics.cycles += 1
+            ff = None if torque_ff is None else torque_ff[a : b + 1]
+            if not ex.follow(s.time[a : b + 1], s.q[a : b + 1], s.contact[a : b + 1], ff):
+                break
+    except KeyboardInterrupt:
+        ex.interrupt()
     return finish_run(plan, ex, wall0, t0)

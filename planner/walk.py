@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 
+from planner.interrupts import shielded
 from planner.local.base import LocalPlan, LocalSettings
 from planner.local.hard import HardPlanner
 from planner.local.recursive import RecursivePlanner
@@ -51,7 +52,8 @@ def plan_walk(
     local = PLANNERS[planner](robot, terrain, mu=mu, settings=settings)
     result = local.plan(start_xy, goal_xy, progress=progress)
     extra = {"planner": planner, "settings": effective(local)}
-    return assemble_plan(robot, terrain, local.mu, start_xy, goal_xy, result, extra)
+    with shielded():  # a Ctrl-C now would lose the plan computed: it waits for the plan
+        return assemble_plan(robot, terrain, local.mu, start_xy, goal_xy, result, extra)
 
 
 def check_endpoints(robot, terrain, start_xy, goal_xy, names=("start", "goal")) -> None:

@@ -206,5 +206,107 @@ def test_sigterm_to_replay_stops_its_server(short_flat_walk):
     # the server subprocess is gone and its port is free again
     time.sleep(0.5)
     assert _port_free(port)
-    leftover = subprocess.run(["pgrep", "-s", str(proc.pid)], capture_output=True)
-    assert leftover.stdout.strip() == b"", leftover.stdout  # nothing left of its session
+    assert _running_in_session(proc.pid) == []  # nothing left of its session
+
+
+def _start(args, **kw):
+    """A ``stratawalk`` subprocess in its own session (so nothing it starts can escape)."""
+    return subprocess.Popen(
+        [sys.executable, "-m", "planner.cli", *args],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True, **kw,
+    )  # fmt: skip
+
+
+def _wait_for(predicate, proc, timeout_s, what):
+    deadline = time.monotonic() + timeout_s
+    while not predicate():
+        assert proc.poll() is None, f"exited before {what}: {proc.communicate()}"
+        assert time.monotonic() < deadline, f"no {what} within {timeout_s} s"
+        time.sleep(0.1)
+
+
+def _finish(proc, timeout_s=60):
+    """Wait for ``proc`` (fail on a hang); its output; nothing of its session may remain."""
+    try:
+        out, err = proc.communicate(timeout=timeout_s)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.communicate()
+        pytest.fail(f"hung after the signals (killed after {timeout_s} s)")
+    time.sleep(0.5)
+    left = _running_in_session(proc.pid)
+    if left:
+        os.killpg(proc.pid, signal.SIGKILL)
+    assert left == [], f"processes left behind: {left}"
+    return out, err
+
+
+def _running_in_session(sid):
+    """Processes of session ``sid`` still running (exited ones, zombies, do not count)."""
+    ps = subprocess.run(["ps", "-o", "pid=,stat=,args=", "-s", str(sid)], capture_output=True)
+    rows = [line.split(None, 2) for line in ps.stdout.decode().splitlines() if line.strip()]
+    return [row for row in rows if not row[1].startswith("Z")]
+
+
+def test_two_ctrl_c_during_a_batch_keep_the_records(tmp_path):
+    from planner.batch import read_results
+
+    scen = tmp_path / "scenarios.yaml"
+    jobs = "".join(f"  - {{goal: [{0.3 + 0.02 * i:.2f}, 0.0]}}\n" for i in range(12))
+    scen.write_text(
+        "defaults: {terrain: flat, start: [0.2, 0.0], time_budget_s: 60}\njobs:\n" + jobs
+    )
+    out = tmp_path / "out"
+    results = out / "results.jsonl"
+    proc = _start(["batch", str(scen), "--out", str(out), "--workers", "2", "--quiet"])
+    _wait_for(lambda: results.exists() and results.read_text().count("\n") >= 1, proc, 300,
+              "a first record")  # fmt: skip
+    proc.send_signal(signal.SIGINT)
+    time.sleep(0.05)
+    proc.send_signal(signal.SIGINT)
+    _, err = _finish(proc)
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err, err
+    records = read_results(results)  # every line whole and valid
+    assert 1 <= len(records) < 12
+    assert all(r["status"] == "ok" for r in records.values())
+
+
+def test_sigterm_to_plan_saves_the_plan_so_far(tmp_path):
+    from planner.plan import Plan
+    from planner.validate import check_plan
+
+    out = tmp_path / "partial.json"
+    proc = _start(["plan", "--terrain", "flat", "--goal", "2.2,0", "--out", str(out)])
+    seen = []
+
+    def stepped():  # the progress bar shows steps taken
+        seen.append(os.read(proc.stderr.fileno(), 4096).decode())
+        return re.search(r"\b[1-9]\d* steps", "".join(seen)) is not None
+
+    _wait_for(stepped, proc, 300, "a planned step")
+    proc.send_signal(signal.SIGTERM)
+    time.sleep(0.05)
+    proc.send_signal(signal.SIGTERM)  # a second one waits for the file
+    text, err = _finish(proc)
+    assert proc.returncode == 143, "".join(seen) + err
+    assert "Traceback" not in err and "wrote" in text, text + err
+    plan = Plan.load(out)
+    assert "interrupted" in plan.outcome["message"] and not plan.outcome["reached_goal"]
+    assert len(plan.keyframes) >= 2 and check_plan(plan).ok
+
+
+def test_ctrl_c_during_simulate_keeps_the_motion(short_flat_walk, tmp_path):
+    from planner.plan import Plan
+
+    path, _, _ = short_flat_walk
+    out = tmp_path / "exec.json"
+    proc = _start(["simulate", str(path), "--time-scale", "20", "--out", str(out)])
+    time.sleep(12.0)  # MuJoCo loads, settles, and runs a while (20x slower than planned)
+    assert proc.poll() is None, proc.communicate()
+    proc.send_signal(signal.SIGINT)
+    text, err = _finish(proc)
+    assert proc.returncode == 130, text + err
+    assert "interrupted" in text and "Traceback" not in err, text + err
+    executed = Plan.load(out)
+    assert len(executed.samples) > 10

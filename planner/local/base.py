@@ -19,6 +19,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from planner import interrupts
 from planner.heuristics import (
     EDGE_MARGIN_M,
     foothold_hazard,
@@ -597,8 +598,9 @@ class LocalPlanner:
     ) -> LocalPlan:
         """Plan from ``start_xy`` (or ``start_state``) until the COM is at ``goal_xy``.
 
-        ``progress(distance_m, steps)`` is called after each step. Ctrl-C stops planning
-        and returns the plan so far (its message says so).
+        ``progress(distance_m, steps)`` is called after each step. Ctrl-C (or SIGTERM
+        under :class:`planner.interrupts.Interrupts`) stops planning and returns the plan
+        so far (its message says so).
         """
         t_begin = time.perf_counter()
         if tau is None:
@@ -609,7 +611,7 @@ class LocalPlanner:
         try:
             message = self._run(walk, run)
         except KeyboardInterrupt:
-            message = f"interrupted (Ctrl-C) after {walk.steps} steps; the plan so far is kept"
+            message = f"interrupted after {walk.steps} steps; the plan so far is kept"
         dist = self.distance_to_goal(walk.state, run)
         stats = {
             "planner": self.name,
@@ -640,6 +642,8 @@ class LocalPlanner:
     def stop_reason(self, walk: Walk, run: _Run, fails_in_row: int = 0) -> str:
         """Why planning must stop now ("" to go on): goal, cycles, time budget, stuck."""
         st = self.settings
+        if interrupts.requested():
+            return f"interrupted after {walk.steps} steps; the plan so far is kept"
         dist = self.distance_to_goal(walk.state, run)
         if dist <= st.goal_tol_m:
             return f"reached the goal: COM {dist * 100:.1f} cm from it"
