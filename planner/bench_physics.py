@@ -257,6 +257,9 @@ def physics_rows(jobs: Sequence[dict], records: dict[str, dict]) -> list[dict]:
             }
             row = {k: v for k, v in row.items() if k != "traceback"}
             row.update({k: planning[k] for k in _PLAN_COLUMNS if k in planning})
+            if mode == "feedback" and row.get("com_to_goal_cm") is not None:
+                # the COM at the goal (records before the fix counted the end of a partial plan)
+                row["reached"] = bool(row["com_to_goal_cm"] <= 5.0 and not row.get("fell"))
             row["success"] = bool(
                 row.get("status") == "ok"
                 and row.get("reached")

@@ -107,7 +107,8 @@ class SimSettings:
     contact_timeconst_s, impratio : MuJoCo contact stiffness (solref) and friction-cone
         impedance ratio (elliptic cones; higher keeps a static foot from creeping).
     record_hz : rate of the executed samples written out.
-    reach_tol_m : the final base within this (xy) of the plan's final base is "reached".
+    reach_tol_m : the final base within this (xy) of the plan's final base is "reached"
+        (feedback: the COM within this of the plan's goal).
     fall_angle_deg : base roll or pitch past this is a fall (so is the body on the ground).
     tip_angle_deg : the body's up axis this far from the plan's is "tipped".
     slip_tol_m : a stance foot's contact point sliding farther than this since its
@@ -617,7 +618,7 @@ class Metrics:
 
     mode: str
     # no fall, and the final base within reach_tol_m (xy) of the plan's final base (feedback,
-    # which plans its own way to the plan's goal: or the COM within reach_tol_m of the goal)
+    # which plans its own way to the plan's goal: the COM within reach_tol_m of the goal)
     reached: bool = False
     final_error_m: float = math.nan  # final base vs the plan's final base, xy
     final_error_3d_m: float = math.nan
@@ -865,8 +866,12 @@ class Monitor:
         m.com_to_goal_m = float(np.linalg.norm(sim.com_W()[:2] - plan.goal[:2]))
         m.plan_com_to_goal_m = float(plan.outcome.get("distance_to_goal", math.nan))
         tol = self.settings.reach_tol_m
-        at_goal = m.mode == "feedback" and m.com_to_goal_m <= tol
-        m.reached = bool((m.final_error_m <= tol or at_goal) and not m.fell)
+        # feedback walks to the goal itself: there, reaching is the COM at the goal (ending
+        # where a partial plan ended is not reaching); open loop: the plan's final base
+        if m.mode == "feedback":
+            m.reached = bool(m.com_to_goal_m <= tol and not m.fell)
+        else:
+            m.reached = bool(m.final_error_m <= tol and not m.fell)
         m.joint_rms_rad = math.sqrt(self._sq / max(self._n, 1))
         m.saturation_frac = self._sat / max(self._n, 1)
         m.sim_time_s = sim.time - sim_t0

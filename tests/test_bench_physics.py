@@ -36,7 +36,7 @@ def _sim(reached, fell=False, **kw):
         "reached": reached,
         "fell": fell,
         "final_error_cm": 3.2,
-        "com_to_goal_cm": 4.1,
+        "com_to_goal_cm": 4.1 if reached else 30.0,
         "body_contact": False,
         "leg_contact_s": 0.0,
         "max_slip_mm": 2.5,
@@ -92,6 +92,12 @@ def test_rows_and_summary_from_hand_made_records(hand_made):
     assert not by[("gen:1", "open")]["success"]  # reached, but fell
     assert not by[("gen:2", "open")]["success"]  # the plan did not reach the goal
     assert by[("gen:2", "feedback")]["status"] == "error"
+    # feedback reaches when the COM is at the goal, not at the end of a partial plan
+    stale = dict(records[job_id(jobs[0])])
+    stale["rows"] = [dict(r) for r in stale["rows"]]
+    stale["rows"][1] |= {"reached": True, "com_to_goal_cm": 140.0}
+    rows_stale = physics_rows(jobs[:1], {job_id(jobs[0]): stale})
+    assert not rows_stale[1]["reached"] and not rows_stale[1]["success"]
     assert by[("gen:3", "open")]["status"] == "missing"  # no record
     s = summarize(rows)
     assert s["named"] == {"open": {"success": 1, "of": 2}, "feedback": {"success": 2, "of": 2}}

@@ -43,8 +43,8 @@ def add_replay_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument(
         "--compare",
         metavar="FILE",
-        help="a second motion of the robot drawn see-through on the same clock, e.g. the "
-        "plan under its execution: `replay exec.json --compare plan.json` after "
+        help="a second motion of the robot drawn see-through on the same clock, e.g. its "
+        "MuJoCo execution: `replay plan.json --compare exec.json` after "
         "`simulate plan.json --out exec.json`",
     )
     p.add_argument("--robot", metavar="URDF", help=ROBOT_HELP)

@@ -472,15 +472,13 @@ def _stratum_label(s: PlanSeries, root: meshcat.Visualizer, tr: Tracks, h: float
 
 def _compared(other: Plan, plan: Plan, root: meshcat.Visualizer, tr: Tracks, geometry: str):
     """``other`` (same robot) see-through on the same clock, with its base path."""
-    from planner.plots import plan_series
-
     if other.robot.get("name") != plan.robot.get("name"):
         raise InputError(
             f"--compare {other.source}: robot {other.robot.get('name')!r}, but the replayed plan"
             f" has {plan.robot.get('name')!r}; compare two motions of the same robot"
         )
     _robot(other, root, tr, geometry, name="compare", rgba=COMPARE_RGBA)
-    base = plan_series(other).base_W
+    base = other.samples.q[:, :3]  # the free-flyer's position: the base path
     root["paths/compare_base"].set_object(
         _geometry().mg.Line(_geometry().mg.PointsGeometry(base.T.astype(np.float32)),
                             _geometry().mg.LineBasicMaterial(color=_hex(COMPARE_RGBA[:3])))
