@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import signal
+import math
 import time
 
+from planner.interrupts import Interrupts
 from planner.outputs import check_file
 from planner.plan import ROBOT_HELP
 from planner.replay.page import write_html
@@ -69,9 +70,12 @@ def cmd_replay(args) -> int:
         print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB; open it in a browser)")
         return 0
     scene = build_scene(plan, **options)
-    # SIGTERM ends the replay like Ctrl-C: the server subprocess is stopped, its ports freed
-    signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
-    with ReplayServer(host, args.port, allow_remote=args.allow_remote) as server:
+    # Ctrl-C or SIGTERM end the replay (exit 0): the flag is polled, so a signal at any
+    # moment, even while the server starts, stops the server subprocess and frees its ports
+    with (
+        Interrupts() as stop,
+        ReplayServer(host, args.port, allow_remote=args.allow_remote) as server,
+    ):
         server.show(scene)
         print(f"replay of {args.plan}: open {server.url}", flush=True)
         print("(play / pause / time: Open Controls > Animations; Ctrl-C to stop)", flush=True)
@@ -79,16 +83,9 @@ def cmd_replay(args) -> int:
             import webbrowser
 
             webbrowser.open(server.url, new=2)
-        try:
-            if args.seconds is None:
-                while True:
-                    time.sleep(3600)
-            else:
-                time.sleep(max(0.0, args.seconds))
-        except KeyboardInterrupt:
+        end = math.inf if args.seconds is None else time.monotonic() + max(0.0, args.seconds)
+        while not stop.interrupted and time.monotonic() < end:
+            time.sleep(min(0.2, max(0.0, end - time.monotonic())))
+        if stop.interrupted:
             print("\nstopped", flush=True)
     return 0
-
-
-def _raise_keyboard_interrupt(signum, frame) -> None:
-    raise KeyboardInterrupt
