@@ -233,7 +233,20 @@ def _c_stderr() -> Iterator[list[str]]:
             lines += tmp.read().decode("utf-8", "replace").splitlines()
 
 
-def _link_geometry(root: ET.Element, link: str) -> list[tuple[str, dict, np.ndarray]]:
+def _numbers(path: Path, where: str, text: object, n: int) -> np.ndarray:
+    """``n`` finite numbers from a URDF attribute; one-line error naming ``where``."""
+    try:
+        values = [float(v) for v in str(text).split()]
+    except ValueError:
+        values = []
+    if len(values) != n or not all(math.isfinite(v) for v in values):
+        raise _fail(path, f"{where}={str(text)!r}: expected {n} finite number(s)")
+    return np.array(values)
+
+
+def _link_geometry(
+    root: ET.Element, link: str, path: Path = Path("<urdf>")
+) -> list[tuple[str, dict, np.ndarray]]:
     """Collision geometries of a URDF link: (kind, attributes, origin xyz)."""
     out = []
     for el in root.findall(f"./link[@name='{link}']/collision"):
@@ -243,7 +256,7 @@ def _link_geometry(root: ET.Element, link: str) -> list[tuple[str, dict, np.ndar
         org = el.find("origin")
         xyz = np.zeros(3)
         if org is not None and org.get("xyz"):
-            xyz = np.array([float(v) for v in org.get("xyz").split()])
+            xyz = _numbers(path, f"link {link!r}: collision <origin xyz", org.get("xyz"), 3)
         out.append((geo[0].tag, dict(geo[0].attrib), xyz))
     return out
 
@@ -399,9 +412,11 @@ def load_robot(name_or_path: str | Path, foot_radius_m: float | None = None) -> 
         for leg in legs:
             frame = model.frames[model.getFrameId(leg.foot_frame)]
             for link in {frame.name, model.frames[frame.parentFrame].name}:
-                for kind, attrib, xyz in _link_geometry(root, link):
+                for kind, attrib, xyz in _link_geometry(root, link, path):
                     if kind == "sphere" and np.linalg.norm(xyz) < 1e-6:
-                        radius = max(radius, float(attrib["radius"]))
+                        where = f"link {link!r}: <sphere radius"
+                        r = float(_numbers(path, where, attrib.get("radius"), 1)[0])
+                        radius = max(radius, r)
 
     root_link = model.frames[2].name if len(model.frames) > 2 else ""
     root_link = next(
@@ -409,13 +424,15 @@ def load_robot(name_or_path: str | Path, foot_radius_m: float | None = None) -> 
         root_link,
     )
     boxes = [
-        (attrib, xyz) for kind, attrib, xyz in _link_geometry(root, root_link) if kind == "box"
+        (attrib, xyz)
+        for kind, attrib, xyz in _link_geometry(root, root_link, path)
+        if kind == "box"
     ]
     if boxes:
         lo = np.full(3, np.inf)
         hi = np.full(3, -np.inf)
         for attrib, xyz in boxes:
-            size = np.array([float(v) for v in attrib["size"].split()])
+            size = _numbers(path, f"link {root_link!r}: <box size", attrib.get("size"), 3)
             lo, hi = np.minimum(lo, xyz - size / 2), np.maximum(hi, xyz + size / 2)
         box, source = np.array([lo, hi]), f"collision box of link '{root_link}'"
     else:

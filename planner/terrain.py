@@ -110,6 +110,8 @@ DEFAULT_FRICTION = 0.7
 DEFAULT_X_MIN = -0.5
 DEFAULT_Y_MIN = -0.6
 MAX_EXTENT_M = 10_000.0  # |x_min|, |y_min|, |y_max| and length at most this [m]
+MAX_STONES = 5_000  # stepping stones in one field (each a term of the CasADi expression)
+MAX_ROUGH_CELLS = 2e7  # the grid a rough relief's amplitude is scaled on (a tenth wavelength)
 DEFAULT_Y_MAX = 0.6
 _COMPLEX_STEP = 1e-30
 _CHUNK = 20000
@@ -596,6 +598,12 @@ class _SteppingStones(_Kind):
             starts.append(lo + 0.5 * (hi - lo - span) + pitch * np.arange(n))
         self.xa, self.ya = starts
         nx, ny = self.xa.size, self.ya.size
+        if nx * ny > MAX_STONES:
+            raise f.fail(
+                "size",
+                f"{nx} x {ny} = {nx * ny} stones; at most {MAX_STONES} (each is a term of the "
+                "terrain's expression): larger stones or gaps, or a smaller region",
+            )
         rng = np.random.default_rng(self.seed)
         tops = self.height + self.height_jitter * rng.uniform(-1.0, 1.0, (ny, nx))
         self.iy, self.ix = (
@@ -666,6 +674,15 @@ class _Rough(_Kind):
         self.ky = 2.0 * math.pi * freq * np.sin(theta)
         self.a = 1.0 / freq
         step = self.wavelength / 10.0
+        cells = ((self.x_end - self.x_start) / step + 1) * ((ctx.y1 - ctx.y0) / step + 1)
+        if cells > MAX_ROUGH_CELLS:
+            raise f.fail(
+                "wavelength",
+                f"{self.wavelength} m over a {self.x_end - self.x_start:.3g} x "
+                f"{ctx.y1 - ctx.y0:.3g} m region is {cells:.3g} cells of a tenth wavelength "
+                f"to scale the relief on; at most {MAX_ROUGH_CELLS:.0e}: a longer wavelength "
+                "or a smaller region",
+            )
         gx = np.arange(self.x_start, self.x_end + 0.5 * step, step)
         gy = np.arange(ctx.y0, ctx.y1 + 0.5 * step, step)
         peak = max(float(np.max(np.abs(self._relief(gx[:, None], row, NP)))) for row in gy)

@@ -80,6 +80,20 @@ def test_terrain_of_absurd_extent_is_refused(field, value, tmp_path, capsys):
     assert not (tmp_path / "t.png").exists()
 
 
+@pytest.mark.parametrize(
+    "text, field",
+    [
+        ("kind: stepping_stones\nlength: 9000\nsize: 0.05\ngap: 0.02\n", "size"),
+        ("kind: rough\nlength: 9000\nwavelength: 0.01\namplitude: 0.02\n", "wavelength"),
+    ],
+)
+def test_terrain_of_too_many_elements_is_refused(text, field, tmp_path, capsys):
+    course = tmp_path / "many.yaml"
+    course.write_text("name: many\n" + text)  # it took 24 GB before the OOM killer came
+    assert main(["terrain", str(course)]) == 2
+    _one_line_error(capsys, "many.yaml", field, "at most")
+
+
 def test_a_large_course_draws_on_a_coarser_grid(tmp_path, capsys):
     from PIL import Image
 
@@ -98,13 +112,21 @@ def test_a_large_course_draws_on_a_coarser_grid(tmp_path, capsys):
         (('<mass value="0.001"/>', '<mass value="-1"/>'), "mass"),
         (('<mass value="2.240"/>', '<mass value="abc"/>'), "mass"),
         (('<mass value="2.240"/>', '<mass value="nan"/>'), "mass"),
+        (('<box size="0.330 0.108 0.143"/>', '<box size=""/>'), "box size"),
+        (
+            (
+                '<sphere radius="0.0103"/></geometry></collision>',
+                '<sphere radius="x"/></geometry></collision>',
+            ),
+            "sphere radius",
+        ),
     ],
 )
 def test_urdf_with_impossible_numbers_is_refused(edit, expect, tmp_path, capsys):
     text = LITTLEDOG_URDF.read_text()
     assert edit[0] in text
     urdf = tmp_path / "edited.urdf"
-    urdf.write_text(text.replace(edit[0], edit[1], 1))
+    urdf.write_text(text.replace(edit[0], edit[1]))  # every occurrence
     for command in (
         ["robot", str(urdf)],
         ["plan", "--robot", str(urdf), "--terrain", "flat", "--goal", "0.5,0"],
