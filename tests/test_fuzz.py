@@ -13,6 +13,7 @@ import contextlib
 import copy
 import json
 import os
+import resource
 import signal
 from pathlib import Path
 
@@ -26,6 +27,18 @@ SCALE = int(os.environ.get("STRATAWALK_FUZZ_SCALE", "1"))
 ROOT = Path(__file__).resolve().parents[1]
 LITTLEDOG_URDF = (ROOT / "models" / "littledog" / "littledog.urdf").read_text()
 CASE_LIMIT_S = 60  # a case that runs longer is a hang
+MEMORY_LIMIT_B = 10 * 2**30  # a case that needs more is a memory bomb (MemoryError, a failure)
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _address_space_limit():
+    """Cap this process's address space, so that input which would take all the machine's
+    memory fails the test with MemoryError instead of calling the OOM killer."""
+    soft, hard = resource.getrlimit(resource.RLIMIT_AS)
+    cap = MEMORY_LIMIT_B if hard == resource.RLIM_INFINITY else min(MEMORY_LIMIT_B, hard)
+    resource.setrlimit(resource.RLIMIT_AS, (cap, hard))
+    yield
+    resource.setrlimit(resource.RLIMIT_AS, (soft, hard))
 
 
 def _settings(n: int):
