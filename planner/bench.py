@@ -934,6 +934,9 @@ def add_bench_parser(subparsers) -> argparse.ArgumentParser:
 
 def cmd_bench(args) -> int:
     """Run ``stratawalk bench theta`` and print the markdown table."""
+    from planner.outputs import check_folder
+
+    check_folder(args.out, "--out")
     terrains = tuple(s.strip() for s in args.terrains.split(",") if s.strip())
     result = run_theta_bench(
         n_per_theta=args.n,

@@ -235,6 +235,9 @@ def add_courses_parser(bench_sub) -> argparse.ArgumentParser:
 
 def cmd_courses(args) -> int:
     """Run ``stratawalk bench courses`` and print the markdown table."""
+    from planner.outputs import check_folder
+
+    check_folder(args.out, "--out")
     from planner.errors import InputError
 
     def names(text: str, what: str) -> tuple[str, ...]:

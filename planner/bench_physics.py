@@ -530,6 +530,9 @@ def _names(text: str) -> tuple[str, ...]:
 
 def cmd_physics(args) -> int:
     """Run ``stratawalk bench physics`` and print the markdown tables."""
+    from planner.outputs import check_folder
+
+    check_folder(args.out, "--out")
     from planner.course_gen import parse_course_name
 
     courses = _names(args.courses)

@@ -315,12 +315,13 @@ def write_course(spec_or_name: dict | str, path: str | Path) -> Path:
         if parsed is None:
             raise InputError(f"course '{spec_or_name}': not a generated course name (gen:SEED)")
         spec = generate_course(parsed[0], parsed[2], parsed[1])
+    from planner.outputs import check_file, check_folder, write_atomic
+
     out = Path(path)
     if out.is_dir() or out.suffix.lower() not in (".yaml", ".yml"):
-        out = out / (spec["name"].replace(":", "_") + ".yaml")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(yaml.safe_dump(spec, sort_keys=False, width=90), encoding="utf-8")
-    return out
+        out = check_folder(out, "--out") / (spec["name"].replace(":", "_") + ".yaml")
+    text = yaml.safe_dump(spec, sort_keys=False, width=90)
+    return write_atomic(check_file(out, "--out"), lambda tmp: tmp.write_text(text, "utf-8"))
 
 
 # ------------------------------------------------------------------------------ command line

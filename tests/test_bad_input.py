@@ -45,6 +45,11 @@ def test_outputs_are_checked_before_any_work(short_flat_walk, tmp_path, capsys):
         (["terrain", "flat", "--png", str(tmp_path)], "--png"),
         (["batch", str(a_file), "--out", str(a_file)], "--out"),
         (["plan", "--terrain", "flat", "--goal", "0.5,0", "--out", str(tmp_path)], "--out"),
+        (["generate-course", "--seed", "1", "--out", str(a_file)], "is a file"),
+        (["generate-course", "--seed", "1", "--out", str(a_file / "c.yaml")], "is a file"),
+        (["bench", "physics", "--courses", "flat", "--out", str(a_file)], "is a file"),
+        (["bench", "courses", "--out", str(a_file)], "is a file"),
+        (["bench", "theta", "--out", str(a_file)], "is a file"),
     ]
     for args, expect in cases:
         assert main(args) == 2, args
