@@ -289,7 +289,8 @@ def test_fuzz_command_lines(data, short_flat_walk, tmp_path_factory, capfd):
         args += ["--out", str(d / "p.json"), "--time-budget", "1", "--quiet"]
     if command == "simulate":
         args += ["--time-scale", "0.05", "--quiet"]  # not a whole walk: a fuzz case is short
-    _judge(args, capfd)
+    with contextlib.chdir(d):  # relative outputs ("--out 0") land in the case's folder
+        _judge(args, capfd)
 
 
 def test_fuzz_batch_scenarios(tmp_path, capfd):
