@@ -69,6 +69,17 @@ def _time_limit(seconds: float):
         signal.signal(signal.SIGALRM, old)
 
 
+@contextlib.contextmanager
+def _working_dir(path):
+    """``os.chdir`` for the block (contextlib.chdir needs Python 3.11)."""
+    old = os.getcwd()
+    os.chdir(path)
+    try:
+        yield
+    finally:
+        os.chdir(old)
+
+
 def _judge(argv: list[str], capfd) -> int:
     """Run ``stratawalk argv``; assert the property; return the exit status."""
     capfd.readouterr()
@@ -289,7 +300,7 @@ def test_fuzz_command_lines(data, short_flat_walk, tmp_path_factory, capfd):
         args += ["--out", str(d / "p.json"), "--time-budget", "1", "--quiet"]
     if command == "simulate":
         args += ["--time-scale", "0.05", "--quiet"]  # not a whole walk: a fuzz case is short
-    with contextlib.chdir(d):  # relative outputs ("--out 0") land in the case's folder
+    with _working_dir(d):  # relative outputs ("--out 0") land in the case's folder
         _judge(args, capfd)
 
 
