@@ -38,6 +38,7 @@ __all__ = [
     "reference_directions",
     "body_pose_on_trajectory",
     "normal_foot_centre_W",
+    "frame_from_directions",
     "foothold_hazard",
     "safe_foothold",
 ]
@@ -195,7 +196,7 @@ def reference_directions(
     return u_f, u_n / np.linalg.norm(u_n)
 
 
-def _frame_from_directions(u_f: _Array, u_n: _Array) -> _Array:
+def frame_from_directions(u_f: _Array, u_n: _Array) -> _Array:
     """Rotation with z_B = u_n and x_B = u_f projected on the plane normal to u_n."""
     z = u_n / np.linalg.norm(u_n)
     x = u_f - np.dot(u_f, z) * z
@@ -232,7 +233,7 @@ def body_pose_on_trajectory(
     rad = normal_smoothing_radius_m(robot) if radius_m is None else float(radius_m)
     p = np.asarray(tau.point(lam), dtype=float).reshape(3)
     u_f, u_n = reference_directions(tau, terrain, p, rad, lam=lam)
-    return p, _frame_from_directions(u_f, u_n)
+    return p, frame_from_directions(u_f, u_n)
 
 
 # ---- Lambda_t, eq. 13 ---------------------------------------------------------------------

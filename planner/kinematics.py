@@ -330,7 +330,7 @@ class LegKinematics:
         in_limits = bool(np.all(th >= lg.lower_rad - 1e-12) and np.all(th <= lg.upper_rad + 1e-12))
         if err_m <= tol_m and in_limits and float(np.max(np.abs(th - th0))) <= max_step_rad:
             return IKResult(joints_rad=th, reachable=True, error_m=err_m, method="newton")
-        return self.ik_leg(leg, target, th0)
+        return self.ik_leg(leg, target, th0, knee=self.knee_direction(leg, th0))
 
     def _reference(self, leg: int, reference_rad) -> np.ndarray:
         if reference_rad is not None:
@@ -433,11 +433,21 @@ class LegKinematics:
         )
 
     def ik(self, base_position_W, base_rotation_W, feet_W, reference_rad=None) -> list[IKResult]:
-        """Leg IK for a body pose and four world-frame foot centres."""
+        """Leg IK for a body pose and four world-frame foot centres.
+
+        With ``reference_rad`` each leg keeps the knee branch of its reference joints
+        (``knee_flipped`` then means: only the other branch reaches); without, the leg's
+        own knee configuration is preferred (:meth:`ik_leg`).
+        """
         rot = np.asarray(base_rotation_W, float)
         feet_B = (np.asarray(feet_W, float) - np.asarray(base_position_W, float)) @ rot
-        ref = None if reference_rad is None else np.asarray(reference_rad, float).reshape(4, 3)
-        return [self.ik_leg(i, feet_B[i], None if ref is None else ref[i]) for i in range(4)]
+        if reference_rad is None:
+            return [self.ik_leg(i, feet_B[i]) for i in range(4)]
+        # a path keeps each leg on its reference's knee branch (a flip mid-path is a jump)
+        ref = np.asarray(reference_rad, float).reshape(4, 3)
+        return [
+            self.ik_leg(i, feet_B[i], ref[i], knee=self.knee_direction(i, ref[i])) for i in range(4)
+        ]
 
 
 def _max_reach(lg: Leg, centre: np.ndarray) -> float:

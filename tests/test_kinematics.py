@@ -198,3 +198,33 @@ def test_paper_mode_com_is_body_origin_offset(littledog):
     whole = kin.com_B(littledog.theta_nor)
     # legs are a quarter of the mass and hang below: the whole-body COM is lower
     assert whole[2] < littledog.body_com_B[2] - 0.01
+
+
+def test_ik_with_a_reference_keeps_its_knee_branch(littledog, rng):
+    """A path's IK (reference joints given) stays on the reference's knee branch: a knee
+    that flips between two samples is a jump the robot cannot make."""
+    kin = kinematics_of(littledog)
+    p, R = np.zeros(3), np.eye(3)
+    lo, hi = littledog.lower_rad, littledog.upper_rad
+    found = kept = 0
+    for _ in range(400):
+        th = rng.uniform(lo, hi)  # (4, 3)
+        centres = kin.feet_W(p, R, th)
+        other = []
+        for i in range(4):
+            ik = kin.ik_leg(i, centres[i], knee=-kin.knee_direction(i, th[i]))
+            other.append(ik.joints_rad if ik.reachable and not ik.knee_flipped else None)
+        if any(o is None for o in other):
+            continue
+        found += 1
+        moved = centres + rng.normal(scale=0.002, size=(4, 3))
+        for ref in (th, np.array(other)):
+            res = kin.ik(p, R, moved, reference_rad=ref)
+            for i in range(4):
+                if not res[i].reachable or res[i].knee_flipped:  # branch left its limits
+                    continue
+                kept += 1
+                assert kin.knee_direction(i, res[i].joints_rad) == kin.knee_direction(i, ref[i])
+        if found >= 5:
+            break
+    assert found >= 5 and kept >= 30, (found, kept)

@@ -20,9 +20,11 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from planner import interrupts
+from planner.footholds import foothold_candidates
 from planner.heuristics import (
     EDGE_MARGIN_M,
     foothold_hazard,
+    frame_from_directions,
     lambda_c,
     lambda_t,
     nominal_height_m,
@@ -31,6 +33,7 @@ from planner.heuristics import (
 )
 from planner.interpolate import default_clearance_m, interpolate_leaf, interpolate_swing
 from planner.kinematics import kinematics_of
+from planner.leg_swing import joint_space_swing
 from planner.links import leg_links
 from planner.local.gait_queue import CRAWL
 from planner.problems import Theta1, Theta2, Theta3, Theta4, ThetaOptions
@@ -43,6 +46,7 @@ from planner.torques import TorqueCheck
 from planner.trajectory import Trajectory
 
 BODY_CLEARANCE_M = 0.005  # least height of the body's bottom above the sharp terrain [m]
+OTHER_FOOTHOLDS = 8  # footholds tried when the body cannot get ready for Lambda_t's
 TARGET_RADIUS_M = 0.01  # a placed foot lands within this of its (edge-free) target [m]
 WIDE_TARGET_RADIUS_M = 0.04  # ... or this, when the leg's links forbid the near footholds
 TORQUE_FRACTION = 0.8  # joint torque / URDF effort the servos may need to hold a sample
@@ -197,6 +201,7 @@ class LocalPlanner:
             "theta3": [0, 0],
             "theta4": [0, 0],
             "swing_ik": [0, 0],
+            "swing_joint_space": [0, 0],
         }
         self.failures: list[dict] = []  # every failed step attempt, for the plan's stats
         self.extra_stats: dict = {}
@@ -279,6 +284,28 @@ class LocalPlanner:
             not_behind_W=state.feet_W[leg],
         )
 
+    def other_footholds(
+        self, state: State, leg: int, tau: Trajectory, tried_W, shrink: float | None = None
+    ) -> list[np.ndarray]:
+        """Footholds to try when the body cannot get ready for ``tried_W`` (issue 15 item 1).
+
+        :func:`planner.footholds.foothold_candidates` around ``tried_W`` at the body pose
+        the move aims for (COM at r_c*), best first, ``tried_W`` itself left out.
+        """
+        rc = self.body_target(state, leg, shrink)
+        u_f, u_n = reference_directions(tau, self.terrain, rc)
+        R = frame_from_directions(u_f, u_n)
+        body_W = rc - R @ self.kin.com_B(state.joints_rad, self.settings.theta.whole_body_com)
+        tried = np.asarray(tried_W, float)
+        return [
+            c
+            for c in foothold_candidates(
+                self.robot, self.terrain, leg, tried, u_f, body_W, R, self.mu,
+                not_behind_W=state.feet_W[leg], limit=OTHER_FOOTHOLDS + 1,
+            )
+            if np.linalg.norm(c[:2] - tried[:2]) > TARGET_RADIUS_M
+        ][:OTHER_FOOTHOLDS]  # fmt: skip
+
     def body_target(self, state: State, leg: int, shrink: float | None = None) -> np.ndarray:
         """r_c* = Lambda_c(Psi, i_f) (eq. 12) at the nominal COM height, with ``shrink``."""
         k = self.settings.shrink if shrink is None else shrink
@@ -337,7 +364,10 @@ class LocalPlanner:
             sol.feasible = False
             sol.diagnosis = f"body move onto three legs: {why}"
             return sol, []
+        land = sol.state.info.get("landing")
         sol.state = self.path_end(path, support)
+        if land is not None:
+            sol.state.info["landing"] = land
         return sol, path
 
     def _via_path(self, start: State, end: State, path: list[State], u_f, u_n):
@@ -391,8 +421,12 @@ class LocalPlanner:
             target_W = lambda_t(self.robot, self.terrain, state, leg, tau, step_m=step_m)
         lifted = state.copy()
         lifted.stratum = leg + 1
+        x0 = None
+        land = state.info.get("landing")  # (target, joints) of a landing-ready Theta2
+        if land is not None and np.allclose(land[0], target_W, atol=1e-9):
+            x0 = np.concatenate([land[1], np.asarray(target_W, float)[:2]])
         for radius in (TARGET_RADIUS_M, WIDE_TARGET_RADIUS_M):
-            sol = self.theta3(leg).solve(lifted, target_W, target_radius_m=radius)
+            sol = self.theta3(leg).solve(lifted, target_W, x0=x0, target_radius_m=radius)
             self._count("theta3", sol.feasible)
             # near an edge the leg's links may forbid every foothold close to the target:
             # let the foot land farther (the edge test below still applies)
@@ -433,6 +467,15 @@ class LocalPlanner:
                 return sol, path
             if "balance" in why:  # a lower swing does not move the COM less
                 break
+        if "balance" not in why:  # the foot's path is clear but a link is not: fold the leg
+            path = joint_space_swing(
+                self.robot, self.terrain, lifted, touch, 2 * self.settings.swing_samples, leg
+            )
+            why2 = "no path in the leg's joint space" if path is None else self.path_problem(path)
+            self._count("swing_joint_space", not why2)
+            if not why2:
+                sol.state = self.path_end(path, tuple(range(4)))
+                return sol, path
         sol.feasible = False
         sol.diagnosis = f"swing of {LEG_NAMES[leg]}: {why}"
         return sol, []
@@ -570,22 +613,41 @@ class LocalPlanner:
 
         The body move is first asked to keep ``leg`` within reach of its next foothold
         (Theta2's swing-ready constraint); if that is infeasible, the paper's plain Theta2.
-        A failed placement keeps the body move (``Step.moved``): the robot stands safely on
-        three legs there. ``shrink`` overrides ``settings.shrink`` of Lambda_c.
+        When that foothold fails (no landing-ready body pose, or no swing), up to
+        ``OTHER_FOOTHOLDS`` others of the leg's reachable, safe region are tried
+        (:meth:`other_footholds`, issue 15). A failed placement keeps the body move
+        (``Step.moved``) of the first attempt: the robot stands safely on three legs there.
+        ``shrink`` overrides ``settings.shrink`` of Lambda_c.
         """
         target, _ = self.foothold_target(state, leg, tau, step_m, shrink)
-        sol2, body_path = self.body_move(state, leg, tau, target, shrink)
-        if not sol2.feasible:
-            sol2, body_path = self.body_move(state, leg, tau, None, shrink)
-        if not sol2.feasible:
-            return Step(leg, False, state, None, None, [], [], "body_move", sol2.diagnosis)
-        moved = sol2.state
-        sol3, swing_path = self.swing(moved, leg, tau, step_m, target)
-        if not sol3.feasible:
-            return Step(
-                leg, False, state, moved, None, body_path, [], "foot_placement", sol3.diagnosis
-            )
-        return Step(leg, True, state, moved, sol3.state, body_path, swing_path)
+        first = None  # the first failure, reported when no foothold works
+        others = None
+        k = 0
+        while k <= OTHER_FOOTHOLDS:
+            sol2, body_path = self.body_move(state, leg, tau, target, shrink)
+            if k == 0 and not sol2.feasible:
+                # the paper's plain Theta2 (no swing-ready pose) for Lambda_t's foothold
+                sol2, body_path = self.body_move(state, leg, tau, None, shrink)
+            if not sol2.feasible:
+                step = Step(leg, False, state, None, None, [], [], "body_move", sol2.diagnosis)
+            else:
+                sol3, swing_path = self.swing(sol2.state, leg, tau, step_m, target)
+                if sol3.feasible:
+                    return Step(leg, True, state, sol2.state, sol3.state, body_path, swing_path)
+                step = Step(
+                    leg, False, state, sol2.state, None, body_path, [], "foot_placement",
+                    sol3.diagnosis,
+                )  # fmt: skip
+            first = first or step
+            if "balance_margin" in step.diagnosis and step.phase == "body_move" and k == 0:
+                break  # the COM cannot shift onto the other three legs: no foothold helps
+            if others is None:
+                others = self.other_footholds(state, leg, tau, target, shrink)
+            if k >= len(others):
+                break
+            target = others[k]
+            k += 1
+        return first
 
     # ---- the loop ----------------------------------------------------------------------
     def plan(

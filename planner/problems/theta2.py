@@ -319,6 +319,12 @@ class Theta2(ThetaProblem):
         p = self.params(start, rc_star_W, u_f, u_n, swing_target_W)
         sol = self.solve_packed(p, self.initial_guess(start, p))
         sol.state.info["rc_star"] = np.asarray(rc_star_W, float)
+        if self.landing and sol.x is not None:
+            # the touch-down joints this pose was found with: Theta3's starting point, so
+            # it finds the clear landing Theta2 proved (from IK of the target it may take
+            # the other side of an edge and fail)
+            land = self.x_block(sol.x, "theta_land").copy()
+            sol.state.info["landing"] = (np.asarray(swing_target_W, float).copy(), land)
         return sol
 
     def _state_from_x(self, x: np.ndarray, p: np.ndarray) -> State:

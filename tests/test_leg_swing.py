@@ -1,0 +1,102 @@
+"""Swings in the leg's joint space (planner.leg_swing) over a barrier, judged by the validator's
+exact distances to the sharp terrain."""
+
+import numpy as np
+import pytest
+
+from planner.interpolate import interpolate_swing
+from planner.kinematics import kinematics_of
+from planner.leg_swing import joint_space_swing
+from planner.links import leg_links
+from planner.state import State
+from planner.terrain import Terrain
+from planner.validate import sharp_surface_distance
+
+BARRIER = {"name": "b", "friction": 0.7, "x_min": -0.5, "length": 2.0, "kind": "barrier",
+           "x": 0.8, "height": 0.075, "thickness": 0.03}  # fmt: skip
+
+
+def _stance(robot, terrain, body, fl_contact, knee):
+    """A state with the body at ``body`` (level), FL on ``fl_contact`` with knee branch ``knee``,
+    the other feet on flat ground around the barrier's near side."""
+    kin = kinematics_of(robot)
+    rho = robot.foot_radius_m
+    feet = np.array([fl_contact, [0.757, -0.065, 0.0], [0.69, 0.07, 0.0], [0.635, -0.065, 0.0]])
+    R = np.eye(3)
+    joints = []
+    for i, f in enumerate(feet):
+        centre_B = R.T @ (f + [0.0, 0.0, rho] - body)
+        ik = kin.ik_leg(i, centre_B, knee=knee if i == 0 else None)
+        assert ik.reachable and not ik.knee_flipped, i
+        joints.append(ik.joints_rad)
+    return State(body.copy(), R, feet, np.array(joints), stratum=0, support=(0, 1, 2, 3))
+
+
+def _clearances(robot, terrain, path):
+    """Least leg-link and swing-foot clearance of FL over a path (validator's distances)."""
+    links = leg_links(robot)
+    fl = np.array([links.capsules[c].leg == 0 for c in links.owner])
+    leg_worst, foot_worst = np.inf, np.inf
+    for s in path:
+        q = robot.q_from(s.base_position_W, s.base_quaternion_xyzw, s.joints_rad)
+        d = sharp_surface_distance(terrain, links.axis_points_W(q)[fl], 0.05, step_m=1e-3)
+        leg_worst = min(leg_worst, float((d - links.radius[fl]).min()))
+        centre = s.base_rotation_W @ kinematics_of(robot).foot_B(0, s.joints_rad[0])
+        centre = centre + s.base_position_W
+        fd = float(sharp_surface_distance(terrain, centre[None], 0.05, step_m=1e-3)[0])
+        if 0 < s.info.get("nu", 0.0) < 1:
+            foot_worst = min(foot_worst, fd - robot.foot_radius_m)
+    return leg_worst, foot_worst
+
+
+@pytest.fixture(scope="module")
+def over_the_barrier(littledog):
+    terrain = Terrain.from_spec(BARRIER)
+    body = np.array([0.70, 0.0, 0.145])
+    lift = _stance(littledog, terrain, body, [0.757, 0.069, 0.0], knee=None)
+    # touch down beyond the barrier on the branch whose links clear it
+    links = leg_links(littledog)
+    for knee in (-1, 1):
+        try:
+            touch = _stance(littledog, terrain, body, [0.89, 0.069, 0.0], knee=knee)
+        except AssertionError:
+            continue
+        q = littledog.q_from(body, touch.base_quaternion_xyzw, touch.joints_rad)
+        if links.clearance_fast(terrain, q)[:2].min() > 0.003:
+            break
+    else:
+        pytest.fail("no clear landing beyond the barrier")
+    lift.stratum = 1
+    return terrain, lift, touch
+
+
+def test_joint_space_swing_clears_a_barrier_the_foot_path_does_not(littledog, over_the_barrier):
+    terrain, lift, touch = over_the_barrier
+    # the foot's path (swing_path) lifts the sphere over the barrier, yet a link cuts it
+    cartesian = interpolate_swing(littledog, terrain, lift, touch, 24, swing_leg=0)
+    assert _clearances(littledog, terrain, cartesian)[0] < 0.0
+    path = joint_space_swing(littledog, terrain, lift, touch, 24, 0)
+    assert path is not None
+    leg_clear, foot_clear = _clearances(littledog, terrain, path)
+    assert leg_clear > 0.0, leg_clear
+    assert foot_clear > -1e-4, foot_clear
+    # the ends are the given states; the stance legs and the body never move
+    np.testing.assert_array_equal(path[0].joints_rad, lift.joints_rad)
+    np.testing.assert_array_equal(path[-1].joints_rad, touch.joints_rad)
+    for s in path:
+        np.testing.assert_array_equal(s.joints_rad[1:], lift.joints_rad[1:])
+        np.testing.assert_array_equal(s.base_position_W, lift.base_position_W)
+    # a continuous motion: no joint jumps between samples, the stored foot is the FK one
+    steps = np.abs(np.diff([s.joints_rad[0] for s in path], axis=0)).max()
+    assert steps < 0.6, steps
+    kin = kinematics_of(littledog)
+    for s in path[1:-1]:
+        centre = s.base_rotation_W @ kin.foot_B(0, s.joints_rad[0]) + s.base_position_W
+        np.testing.assert_allclose(s.feet_W[0] + [0, 0, littledog.foot_radius_m], centre)
+
+
+def test_joint_space_swing_refuses_a_moving_body(littledog, over_the_barrier):
+    terrain, lift, touch = over_the_barrier
+    moved = touch.copy()
+    moved.base_position_W = moved.base_position_W + [0.01, 0.0, 0.0]
+    assert joint_space_swing(littledog, terrain, lift, moved, 24, 0) is None
