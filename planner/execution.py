@@ -279,11 +279,10 @@ def run_feedback(
                 local._log_failure(cycles, leg, step.phase, where, step.diagnosis)
             if step.moved is None:
                 continue  # the body move failed: nothing to execute
-            body_s = float(np.linalg.norm(step.moved.base_position_W - state.base_position_W))
-            body_s = max(body_s / st.body_speed_m_s, 0.2)
+            body_s, swing_s = local.durations(step)  # the planner's own timing
             swing = step.swing_path if step.ok else []
             path = list(step.body_path) + list(swing[1:])
-            times = _path_times(len(step.body_path), len(swing), body_s, st.swing_time_s)
+            times = _path_times(len(step.body_path), len(swing), body_s, swing_s)
             q = np.array([robot.q_from(p.base_position_W, p.base_quaternion_xyzw, p.joints_rad)
                           for p in path])  # fmt: skip
             contact = np.array([contact_mask(s.stratum) for s in path])

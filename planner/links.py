@@ -316,6 +316,14 @@ class LegLinks:
         np.minimum.at(out, self.owner, gap)
         return out
 
+    def point_clearances(self, terrain, q: _Array) -> tuple[_Array, _Array]:
+        """Clearance bounds of every axis point (P,) and the points (P, 3) [m], world frame.
+
+        As :meth:`clearance_fast`, per point; ``owner`` names each point's capsule.
+        """
+        gap = self._gaps(terrain, q)
+        return gap, self._points_W
+
     def _gaps(self, terrain, q: _Array) -> _Array:
         """(P,) clearance bound of every axis point (see :meth:`clearance_fast`)."""
         pts = self._points_W = self.axis_points_W(q)

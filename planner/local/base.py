@@ -46,6 +46,11 @@ from planner.torques import TorqueCheck
 from planner.trajectory import Trajectory
 
 BODY_CLEARANCE_M = 0.005  # least height of the body's bottom above the sharp terrain [m]
+JOINT_SPEED_FRACTION = 0.5  # of the URDF velocity limit, the most a path asks of a joint
+KNEE_CHOICE_CLEARANCE_M = 0.015  # a landing whose links are nearer an edge than this ...
+KNEE_CHOICE_GAIN_M = 0.01  # ... takes the other knee branch if it is this much clearer
+KNEE_CHOICE_LOOKAHEAD = 0.5  # fraction of a stride the body is moved ahead to judge it
+KNEE_CHOICE_FOOT_ZONE_M = 0.03  # (link points this near the foot centre do not count)
 OTHER_FOOTHOLDS = 8  # footholds tried when the body cannot get ready for Lambda_t's
 TARGET_RADIUS_M = 0.01  # a placed foot lands within this of its (edge-free) target [m]
 WIDE_TARGET_RADIUS_M = 0.04  # ... or this, when the leg's links forbid the near footholds
@@ -158,10 +163,11 @@ class Walk:
         p = self.planner
         if step.moved is None:
             return
-        p._append(self.samples, self.times, step.body_path, p._body_time(step.start, step.moved))
+        body_s, swing_s = p.durations(step)
+        p._append(self.samples, self.times, step.body_path, body_s)
         self.keyframes.append(step.moved)
         if step.ok:
-            p._append(self.samples, self.times, step.swing_path, p.settings.swing_time_s)
+            p._append(self.samples, self.times, step.swing_path, swing_s)
             self.keyframes += [p._swing_keyframe(step.swing_path, step.leg, p.check), step.end]
             self.steps += 1
 
@@ -449,6 +455,16 @@ class LocalPlanner:
             sol.feasible = False
             sol.diagnosis = f"foothold of {LEG_NAMES[leg]} has {hazard}"
             return sol, []
+        other = self._other_knee_landing(touch, leg)
+        if other is not None:  # a knee over an edge: land on the branch that clears it
+            path = joint_space_swing(
+                self.robot, self.terrain, lifted, other, 2 * self.settings.swing_samples, leg
+            )
+            why = "no path in the leg's joint space" if path is None else self.path_problem(path)
+            self._count("swing_joint_space", not why)
+            if not why:
+                sol.state = self.path_end(path, tuple(range(4)))
+                return sol, path
         clearance = self.settings.clearance_m or default_clearance_m(self.robot)
         for clr in (clearance, 0.5 * clearance):
             path = interpolate_swing(
@@ -479,6 +495,69 @@ class LocalPlanner:
         sol.feasible = False
         sol.diagnosis = f"swing of {LEG_NAMES[leg]}: {why}"
         return sol, []
+
+    def _other_knee_landing(self, touch: State, leg: int) -> State | None:
+        """``touch`` with ``leg`` on its other knee branch, where that clears an edge better.
+
+        Beyond the paper: a leg that lands next to a tall edge with its knee over it (a
+        hind leg before a barrier, whose knee points forward) is clear at touch-down, but
+        the body moves that follow lower the knee onto the edge. Both branches are judged
+        with the body ``KNEE_CHOICE_LOOKAHEAD`` of a stride further along (where the next
+        moves take it; a whole stride leaves the reach of a leg at the back), also lowered
+        to the nominal height over the ground (a raised body comes down), by the least
+        clearance of the leg's links away from the foot (where the shank always comes
+        near the ground): the other branch is taken when the leg's own one comes within
+        ``KNEE_CHOICE_CLEARANCE_M`` there and the other is ``KNEE_CHOICE_GAIN_M`` clearer.
+        The swing then changes branch in the air (:func:`joint_space_swing`).
+        """
+        links = leg_links(self.robot)
+        mine = np.array([links.capsules[c].leg == leg for c in links.owner])
+        R = touch.base_rotation_W
+        th = touch.joints_rad[leg]
+        centre = R @ self.kin.foot_B(leg, th) + touch.base_position_W
+        ahead = R[:, 0].copy()
+        ahead[2] = 0.0
+        ahead *= KNEE_CHOICE_LOOKAHEAD * self.stride_m() / max(float(np.linalg.norm(ahead)), 1e-9)
+        moved = touch.copy()
+        moved.base_position_W = touch.base_position_W + ahead
+        lowered = moved.copy()  # ... and at the nominal height over the ground there
+        lowered.base_position_W[2] = min(
+            moved.base_position_W[2],
+            float(self.terrain.height(*moved.base_position_W[:2])) + nominal_height_m(self.robot),
+        )
+
+        def clearance(knee: int) -> tuple[float, np.ndarray | None]:
+            """Least far clearance of the leg on branch ``knee`` at the three body poses."""
+            out, joints = np.inf, None
+            for s in (touch, moved, lowered):
+                ik = self.kin.ik_leg(
+                    leg, R.T @ (centre - s.base_position_W), reference_rad=th, knee=knee
+                )
+                if not ik.reachable or ik.knee_flipped:
+                    if s is touch:
+                        return -np.inf, None
+                    continue  # out of reach there: the body will not go there
+                j = s.joints_rad.copy()
+                j[leg] = ik.joints_rad
+                joints = ik.joints_rad if joints is None else joints
+                q = self.robot.q_from(s.base_position_W, s.base_quaternion_xyzw, j)
+                gap, pts = links.point_clearances(self.terrain, q)
+                far = mine & (np.linalg.norm(pts - centre, axis=1) >= KNEE_CHOICE_FOOT_ZONE_M)
+                if far.any():
+                    out = min(out, float(gap[far].min()))
+            return out, joints
+
+        own = self.kin.knee_direction(leg, th)
+        have, _ = clearance(own)
+        if have >= KNEE_CHOICE_CLEARANCE_M:
+            return None
+        better, joints = clearance(-own)
+        if joints is None or better < have + KNEE_CHOICE_GAIN_M:
+            return None
+        other = touch.copy()
+        other.joints_rad = touch.joints_rad.copy()
+        other.joints_rad[leg] = joints
+        return other
 
     def path_problem(self, path: list[State]) -> str:
         """Why a sampled leaf path is not executable, or "": reach and balance per sample.
@@ -763,6 +842,36 @@ class LocalPlanner:
     def _body_time(self, a: State, b: State) -> float:
         d = float(np.linalg.norm(b.base_position_W - a.base_position_W))
         return max(d / self.settings.body_speed_m_s, 0.2)
+
+    def durations(self, step: Step) -> tuple[float, float]:
+        """Durations [s] of a step's body move and swing.
+
+        ``body_speed_m_s`` and ``swing_time_s``, longer where a joint would pass its share
+        of its speed limit (:meth:`_joint_time`). The executor (8.3) uses the same.
+        """
+        body_s = self._body_time(step.start, step.moved) if step.moved is not None else 0.0
+        body_s = max(body_s, self._joint_time(step.body_path))
+        swing_s = max(self.settings.swing_time_s, self._joint_time(step.swing_path))
+        return body_s, swing_s
+
+    def _joint_time(self, path: list[State]) -> float:
+        """Least duration [s] of a path sampled evenly in time within the joints' speed.
+
+        Every joint moves at most ``JOINT_SPEED_FRACTION`` of its URDF velocity limit
+        between two samples (a joint-space swing that flips a knee turns it by 3 rad; in
+        the plain 0.6 s swing the servos lagged 90 degrees in MuJoCo). Joints without a
+        limit in the URDF are not bound.
+        """
+        if len(path) < 2:
+            return 0.0
+        vmax = np.asarray(self.robot.model.velocityLimit, float)[-12:]
+        ok = np.isfinite(vmax) & (vmax > 0)
+        if not ok.any():
+            return 0.0
+        th = np.array([s.joints_rad.ravel() for s in path])
+        step = np.abs(np.diff(th, axis=0)).max(axis=0)
+        per = step[ok] / (JOINT_SPEED_FRACTION * vmax[ok])
+        return float(per.max() * (len(path) - 1))
 
     @staticmethod
     def _append(samples: list, times: list, path: list, duration_s: float) -> None:
