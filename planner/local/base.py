@@ -49,6 +49,7 @@ BODY_CLEARANCE_M = 0.005  # least height of the body's bottom above the sharp te
 JOINT_SPEED_FRACTION = 0.9  # of the URDF velocity limit, the most a path asks of a joint
 KNEE_CHOICE_CLEARANCE_M = 0.015  # a landing whose links are nearer an edge than this ...
 KNEE_CHOICE_GAIN_M = 0.01  # ... takes the other knee branch if it is this much clearer
+KNEE_CHOICE_EDGE_M = 0.06  # ... next to an edge this much higher than the foothold
 KNEE_CHOICE_LOOKAHEAD = 0.5  # fraction of a stride the body is moved ahead to judge it
 KNEE_CHOICE_FOOT_ZONE_M = 0.03  # (link points this near the foot centre do not count)
 OTHER_FOOTHOLDS = 8  # footholds tried when the body cannot get ready for Lambda_t's
@@ -508,7 +509,10 @@ class LocalPlanner:
         clearance of the leg's links away from the foot (where the shank always comes
         near the ground): the other branch is taken when the leg's own one comes within
         ``KNEE_CHOICE_CLEARANCE_M`` there and the other is ``KNEE_CHOICE_GAIN_M`` clearer.
-        The swing then changes branch in the air (:func:`joint_space_swing`).
+        The swing then changes branch in the air (:func:`joint_space_swing`). Only next
+        to a tall edge (terrain within half the leg's reach ``KNEE_CHOICE_EDGE_M`` above
+        the foothold: a barrier, a tall riser): on stepping stones it flipped knees over
+        their few centimetres of height and the open-loop walk fell.
         """
         links = leg_links(self.robot)
         mine = np.array([links.capsules[c].leg == leg for c in links.owner])
@@ -547,6 +551,15 @@ class LocalPlanner:
                     out = min(out, float(gap[far].min()))
             return out, joints
 
+        # only next to a tall edge: terrain within half the leg's reach this much higher
+        foot = touch.feet_W[leg]
+        r = 0.5 * float(self.robot.reach_m[leg])
+        u = np.linspace(-r, r, 15)
+        X, Y = np.meshgrid(foot[0] + u, foot[1] + u)
+        near = np.hypot(X - foot[0], Y - foot[1]) <= r
+        H = np.asarray(self.terrain.height_sharp(X[near], Y[near]), float)
+        if float(H.max()) < float(foot[2]) + KNEE_CHOICE_EDGE_M:
+            return None
         own = self.kin.knee_direction(leg, th)
         have, _ = clearance(own)
         if have >= KNEE_CHOICE_CLEARANCE_M:
