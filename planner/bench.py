@@ -48,6 +48,7 @@ from typing import Any
 
 import numpy as np
 
+from planner.outputs import write_atomic
 from planner.problems import Theta1, Theta2, Theta3, Theta4
 from planner.problems.base import FEASIBILITY_TOL, ThetaOptions, ThetaProblem
 from planner.state import State
@@ -738,8 +739,8 @@ def run_theta_bench(
     }
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "theta.json").write_text(_dump_json(result))
-    (out / "theta.md").write_text(render_markdown(result))
+    write_atomic(out / "theta.json", lambda p: p.write_text(_dump_json(result)))
+    write_atomic(out / "theta.md", lambda p: p.write_text(render_markdown(result)))
     return result
 
 

@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from planner.batch import DEFAULTS, job_id, run_batch
+from planner.outputs import write_atomic
 
 __all__ = [
     "COURSES",
@@ -156,8 +157,9 @@ def run_course_bench(
         "interrupted": summary.interrupted,
         "rows": rows,
     }
-    (out / "courses.json").write_text(json.dumps(result, indent=1, allow_nan=False) + "\n")
-    (out / "courses.md").write_text(render_markdown(result))
+    text = json.dumps(result, indent=1, allow_nan=False) + "\n"
+    write_atomic(out / "courses.json", lambda p: p.write_text(text))
+    write_atomic(out / "courses.md", lambda p: p.write_text(render_markdown(result)))
     return result
 
 

@@ -42,6 +42,7 @@ from typing import Any
 
 from planner.bench_courses import COURSES, GOAL_XY, START_XY
 from planner.errors import InputError
+from planner.outputs import write_atomic
 
 __all__ = [
     "MODES",
@@ -413,8 +414,9 @@ def write_results(
     result = _clean(result)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "physics.json").write_text(json.dumps(result, indent=1, allow_nan=False) + "\n")
-    (out / "physics.md").write_text(render_markdown(result))
+    text = json.dumps(result, indent=1, allow_nan=False) + "\n"
+    write_atomic(out / "physics.json", lambda p: p.write_text(text))
+    write_atomic(out / "physics.md", lambda p: p.write_text(render_markdown(result)))
     return result
 
 
