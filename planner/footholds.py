@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from planner.heuristics import foothold_hazard
+from planner.heuristics import foothold_hazard, horizontal_axes
 from planner.kinematics import hip_centre_B
 
 __all__ = ["foothold_candidates"]
@@ -68,11 +68,7 @@ def foothold_candidates(
     skipped.
     """
     t = np.asarray(target_W, float).reshape(3)
-    f = np.asarray(forward_W, float).reshape(3).copy()
-    f[2] = 0.0
-    nf = float(np.linalg.norm(f))
-    f = np.array([1.0, 0.0, 0.0]) if nf < 1e-9 else f / nf
-    side = np.array([-f[1], f[0], 0.0])
+    f, side = horizontal_axes(forward_W)
     lg = robot.legs[leg]
     hip_B = hip_centre_B(lg)
     hip_B = lg.points_B[0] if hip_B is None else hip_B

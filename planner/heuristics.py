@@ -40,6 +40,7 @@ __all__ = [
     "normal_foot_centre_W",
     "frame_from_directions",
     "foothold_hazard",
+    "horizontal_axes",
     "safe_foothold",
 ]
 
@@ -336,6 +337,15 @@ def foothold_hazard(
     return ""
 
 
+def horizontal_axes(forward_W: ArrayLike) -> tuple[_Array, _Array]:
+    """Unit forward (``forward_W`` made horizontal; world x if vertical) and left vectors."""
+    f = np.asarray(forward_W, float).reshape(3).copy()
+    f[2] = 0.0
+    nf = float(np.linalg.norm(f))
+    f = np.array([1.0, 0.0, 0.0]) if nf < 1e-9 else f / nf
+    return f, np.array([-f[1], f[0], 0.0])
+
+
 def safe_foothold(
     terrain,
     target_W: ArrayLike,
@@ -363,11 +373,7 @@ def safe_foothold(
     target, the hazard) when none is safe.
     """
     t = np.asarray(target_W, float).reshape(3)
-    f = np.asarray(forward_W, float).reshape(3).copy()
-    f[2] = 0.0
-    nf = float(np.linalg.norm(f))
-    f = np.array([1.0, 0.0, 0.0]) if nf < 1e-9 else f / nf
-    side = np.array([-f[1], f[0], 0.0])
+    f, side = horizontal_axes(forward_W)
     k = int(round(max_shift_m / step_m))
     m = int(round(max_lateral_m / lateral_step_m))
     cands = [

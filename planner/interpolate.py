@@ -46,6 +46,7 @@ __all__ = [
     "swing_path",
     "swing_foot_path",
     "default_clearance_m",
+    "smootherstep",
     "interpolate_leaf",
     "interpolate_swing",
 ]
@@ -71,7 +72,7 @@ def default_clearance_m(robot: Robot) -> float:
     return float(CLEARANCE_FRACTION_OF_REACH * np.mean(robot.reach_m))
 
 
-def _smootherstep(u: _Array) -> _Array:
+def smootherstep(u: _Array) -> _Array:
     """6u^5 - 15u^4 + 10u^3: 0 -> 1 with zero velocity and acceleration at both ends."""
     u = np.clip(u, 0.0, 1.0)
     return u * u * u * (u * (6.0 * u - 15.0) + 10.0)
@@ -244,7 +245,7 @@ def swing_path(
     phase = np.clip(np.searchsorted(frac, s, side="right") - 1, 0, 4)
     width = np.maximum(frac[phase + 1] - frac[phase], 1e-300)
     u = np.where(frac[phase + 1] > frac[phase], (s - frac[phase]) / width, 1.0)
-    w = _smootherstep(u)[:, None]
+    w = smootherstep(u)[:, None]
     centres = corners[phase] + w * (corners[phase + 1] - corners[phase])
     travel = phase == 2
     if np.any(travel):

@@ -34,8 +34,9 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from planner.contact import E_Z, foot_centre_from_contact
+from planner.interpolate import smootherstep
 from planner.kinematics import kinematics_of
-from planner.links import leg_links
+from planner.links import disc_clearance, leg_links
 from planner.state import State
 
 __all__ = ["joint_space_swing"]
@@ -80,19 +81,10 @@ class _Free:
                 rad.append(np.full(len(links.points_J[c]), links.capsules[c].radius_m))
                 own.append(np.full(len(links.points_J[c]), k))
         pts, rad, own = np.concatenate(pts), np.concatenate(rad), np.concatenate(own)
-        ang = 2.0 * np.pi * np.arange(8) / 8
-        ring = 1.05 * rad[:, None]
-        xs = np.concatenate([pts[:, :1], pts[:, :1] + ring * np.cos(ang)], axis=1)
-        ys = np.concatenate([pts[:, 1:2], pts[:, 1:2] + ring * np.sin(ang)], axis=1)
-        h = np.asarray(self.terrain.height_sharp(xs, ys), float).reshape(xs.shape).max(axis=1)
         gap = np.full(len(joints), np.inf)
-        np.minimum.at(gap, own, pts[:, 2] - rad - h)
-        centres = self.centres_W(joints)
-        ring = 1.05 * self.rho
-        xs = centres[:, :1] + np.concatenate([[0.0], ring * np.cos(ang)])[None, :]
-        ys = centres[:, 1:2] + np.concatenate([[0.0], ring * np.sin(ang)])[None, :]
-        hf = np.asarray(self.terrain.height_sharp(xs, ys), float).reshape(xs.shape).max(axis=1)
-        return (gap >= LINK_MARGIN_M) & (centres[:, 2] - self.rho - hf >= FOOT_MARGIN_M)
+        np.minimum.at(gap, own, disc_clearance(self.terrain, pts, rad))
+        foot = disc_clearance(self.terrain, self.centres_W(joints), self.rho)
+        return (gap >= LINK_MARGIN_M) & (foot >= FOOT_MARGIN_M)
 
     def centres_W(self, joints: _Array) -> _Array:
         """(k, 3) foot sphere centres [m], world frame."""
@@ -217,15 +209,15 @@ def joint_space_swing(
         return None
     way = _shortcut(free, [allnodes[k] for k in chain])
     way = [a, *way, b]
-    return _sample(robot, terrain, free, state_lift, state_touch, np.array(way), n)
+    return _sample(free, state_lift, state_touch, np.array(way), n)
 
 
-def _sample(robot, terrain, free: _Free, lift: State, touch: State, way: _Array, n: int):
+def _sample(free: _Free, lift: State, touch: State, way: _Array, n: int):
     """``n`` states along the joint polyline ``way`` (arc length, smootherstep in time)."""
     seg = np.linalg.norm(np.diff(way, axis=0), axis=1)
     cum = np.concatenate([[0.0], np.cumsum(seg)])
     s = np.linspace(0.0, 1.0, int(n))
-    u = s**3 * (10.0 - 15.0 * s + 6.0 * s**2) * cum[-1]
+    u = smootherstep(s) * cum[-1]
     joints_i = np.column_stack([np.interp(u, cum, way[:, k]) for k in range(3)])
     centres = free.centres_W(joints_i)
     i = free.leg

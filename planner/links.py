@@ -37,7 +37,7 @@ from numpy.typing import NDArray
 if TYPE_CHECKING:
     from planner.robot import Robot
 
-__all__ = ["Capsule", "LegLinks", "Witness", "leg_links"]
+__all__ = ["Capsule", "LegLinks", "Witness", "disc_clearance", "leg_links"]
 
 _Array = NDArray[np.float64]
 FALLBACK_RADIUS_FRACTION = 0.08  # capsule radius / segment length when the URDF has no shape
@@ -327,12 +327,24 @@ class LegLinks:
     def _gaps(self, terrain, q: _Array) -> _Array:
         """(P,) clearance bound of every axis point (see :meth:`clearance_fast`)."""
         pts = self._points_W = self.axis_points_W(q)
-        ang = 2.0 * np.pi * np.arange(_DISC_DIRECTIONS) / _DISC_DIRECTIONS
-        ring = 1.05 * self.radius[:, None]
-        xs = np.concatenate([pts[:, :1], pts[:, :1] + ring * np.cos(ang)], axis=1)
-        ys = np.concatenate([pts[:, 1:2], pts[:, 1:2] + ring * np.sin(ang)], axis=1)
-        h = np.asarray(terrain.height_sharp(xs, ys), dtype=float).reshape(xs.shape).max(axis=1)
-        return pts[:, 2] - self.radius - h
+        return disc_clearance(terrain, pts, self.radius)
+
+
+def disc_clearance(terrain, points_W: _Array, radius_m) -> _Array:
+    """(P,) cheap, conservative clearance of spheres or capsule sections at ``points_W``.
+
+    Each point's height minus ``radius_m`` minus the highest sharp terrain under a disc of
+    1.05 ``radius_m`` around it (the point and ``_DISC_DIRECTIONS`` on the circle); see
+    :meth:`LegLinks.clearance_fast`.
+    """
+    pts = np.asarray(points_W, float)
+    r = np.broadcast_to(np.asarray(radius_m, float), (len(pts),))
+    ang = 2.0 * np.pi * np.arange(_DISC_DIRECTIONS) / _DISC_DIRECTIONS
+    ring = 1.05 * r[:, None]
+    xs = np.concatenate([pts[:, :1], pts[:, :1] + ring * np.cos(ang)], axis=1)
+    ys = np.concatenate([pts[:, 1:2], pts[:, 1:2] + ring * np.sin(ang)], axis=1)
+    h = np.asarray(terrain.height_sharp(xs, ys), dtype=float).reshape(xs.shape).max(axis=1)
+    return pts[:, 2] - r - h
 
 
 @dataclass

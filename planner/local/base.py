@@ -458,11 +458,7 @@ class LocalPlanner:
             return sol, []
         other = self._other_knee_landing(touch, leg)
         if other is not None:  # a knee over an edge: land on the branch that clears it
-            path = joint_space_swing(
-                self.robot, self.terrain, lifted, other, 2 * self.settings.swing_samples, leg
-            )
-            why = "no path in the leg's joint space" if path is None else self.path_problem(path)
-            self._count("swing_joint_space", not why)
+            path, why = self._joint_space_swing(lifted, other, leg)
             if not why:
                 sol.state = self.path_end(path, tuple(range(4)))
                 return sol, path
@@ -485,17 +481,22 @@ class LocalPlanner:
             if "balance" in why:  # a lower swing does not move the COM less
                 break
         if "balance" not in why:  # the foot's path is clear but a link is not: fold the leg
-            path = joint_space_swing(
-                self.robot, self.terrain, lifted, touch, 2 * self.settings.swing_samples, leg
-            )
-            why2 = "no path in the leg's joint space" if path is None else self.path_problem(path)
-            self._count("swing_joint_space", not why2)
+            path, why2 = self._joint_space_swing(lifted, touch, leg)
             if not why2:
                 sol.state = self.path_end(path, tuple(range(4)))
                 return sol, path
         sol.feasible = False
         sol.diagnosis = f"swing of {LEG_NAMES[leg]}: {why}"
         return sol, []
+
+    def _joint_space_swing(self, lifted: State, touch: State, leg: int):
+        """(samples, why): :func:`joint_space_swing` and the path checks ("" if executable)."""
+        path = joint_space_swing(
+            self.robot, self.terrain, lifted, touch, 2 * self.settings.swing_samples, leg
+        )
+        why = "no path in the leg's joint space" if path is None else self.path_problem(path)
+        self._count("swing_joint_space", not why)
+        return path, why
 
     def _other_knee_landing(self, touch: State, leg: int) -> State | None:
         """``touch`` with ``leg`` on its other knee branch, where that clears an edge better.
