@@ -29,7 +29,7 @@ from numpy.typing import ArrayLike, NDArray
 from planner.heuristics import foothold_hazard, horizontal_axes
 from planner.kinematics import hip_centre_B
 
-__all__ = ["foothold_candidates"]
+__all__ = ["foothold_candidates", "best_and_shortest"]
 
 _Array = NDArray[np.float64]
 GRID_M = 0.01  # spacing of the candidate grid [m]
@@ -42,6 +42,8 @@ SLOPE_COST = 0.2  # x (1 - n_z) of the ground under the foot
 MIN_ADVANCE_M = 0.01  # a candidate is at least this far ahead of the foot's contact
 REACH_FRACTION = 1.0  # the sphere centre within the leg's reach of the hip ...
 BODY_SLACK_M = 0.03  # ... where the body may end up this far from the pose aimed for
+DEFAULT_BACK_M = 0.06  # candidates reach this far behind the target (or back to the foot)
+HIP_FOLLOW = 0.5  # ... and the hip follows this share of a foothold's height change
 
 
 def foothold_candidates(
@@ -54,7 +56,7 @@ def foothold_candidates(
     body_rotation_W: ArrayLike,
     mu: float,
     not_behind_W: ArrayLike | None = None,
-    max_back_m: float = 0.06,
+    max_back_m: float | None = None,
     max_ahead_m: float = 0.09,
     max_lateral_m: float = 0.05,
     min_spacing_m: float = 0.02,
@@ -65,7 +67,10 @@ def foothold_candidates(
     ``body_position_W``/``body_rotation_W``: the body pose the move before the swing aims
     for (the hip's position there bounds the reach). ``not_behind_W``: the foot's current
     contact; candidates less than ``MIN_ADVANCE_M`` ahead of it along ``forward_W`` are
-    skipped.
+    skipped (the grid reaches back to it: ``max_back_m`` None), and a candidate higher or
+    lower than it moves the hip up or down by ``HIP_FOLLOW`` of the difference (the body
+    follows its footholds' plane, in which a pair of legs shares a step:
+    :func:`planner.heuristics.support_body_target_W`).
     """
     t = np.asarray(target_W, float).reshape(3)
     f, side = horizontal_axes(forward_W)
@@ -76,6 +81,11 @@ def foothold_candidates(
     reach = float(robot.reach_m[leg])
     rho = float(robot.foot_radius_m)
 
+    if max_back_m is None:  # back to the foot (the nearest safe point past an edge), or 6 cm
+        max_back_m = DEFAULT_BACK_M
+        if not_behind_W is not None:
+            gap = float((t[:2] - np.asarray(not_behind_W, float).reshape(3)[:2]) @ f[:2])
+            max_back_m = max(max_back_m, gap)
     d = np.arange(-max_back_m, max_ahead_m + 1e-9, GRID_M)
     lat = np.arange(-max_lateral_m, max_lateral_m + 1e-9, GRID_M)
     D, L = np.meshgrid(d, lat, indexing="ij")
@@ -88,7 +98,10 @@ def foothold_candidates(
     z = np.asarray(terrain.height(xy[:, 0], xy[:, 1]), float)
     n = np.asarray(terrain.normal(np.column_stack([xy, z])), float).reshape(-1, 3)
     centres = np.column_stack([xy, z]) + rho * n
-    dist = np.linalg.norm(centres - hip_W, axis=1)
+    hips = np.repeat(hip_W[None, :], len(D), axis=0)
+    if not_behind_W is not None:
+        hips[:, 2] += HIP_FOLLOW * (z - float(np.asarray(not_behind_W, float).reshape(3)[2]))
+    dist = np.linalg.norm(centres - hips, axis=1)
     keep &= dist <= REACH_FRACTION * reach + BODY_SLACK_M
     cost = (
         SHORT_COST * np.maximum(-D, 0.0)
@@ -104,7 +117,28 @@ def foothold_candidates(
         c = np.array([xy[k, 0], xy[k, 1], z[k]])
         if any(np.linalg.norm(c[:2] - o[:2]) < min_spacing_m for o in out):
             continue
-        if foothold_hazard(terrain, c, rho, mu):
+        if foothold_hazard(terrain, c, rho, mu, forward_W=f):
             continue
         out.append(c)
+    return out
+
+
+def best_and_shortest(
+    candidates: list[_Array], foot_W: ArrayLike, forward_W: ArrayLike, n: int
+) -> list[_Array]:
+    """``n`` of ``candidates`` (best first), alternating best-scored and shortest steps.
+
+    The score prefers a full stride; where the body cannot follow that far (a leg at the
+    foot of a riser, the hind legs still below a step) the way on is the nearest safe
+    point past the edge, which the score ranks last. Alternating the two orders tries both
+    within a few attempts.
+    """
+    f, _ = horizontal_axes(forward_W)
+    foot = np.asarray(foot_W, float).reshape(3)
+    by_advance = sorted(candidates, key=lambda c: float((c[:2] - foot[:2]) @ f[:2]))
+    out: list[_Array] = []
+    for a, b in zip(candidates, by_advance, strict=True):
+        for c in (a, b):
+            if len(out) < n and not any(c is o for o in out):
+                out.append(c)
     return out

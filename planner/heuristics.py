@@ -33,6 +33,8 @@ __all__ = [
     "normal_smoothing_radius_m",
     "support_centroid_W",
     "support_incentre_W",
+    "support_plane_W",
+    "support_body_target_W",
     "lambda_c",
     "lambda_t",
     "reference_directions",
@@ -51,6 +53,9 @@ EDGE_MARGIN_M = 0.015  # a foothold keeps this much beyond the foot radius from 
 WALL_RADIUS_M = 0.04  # a foothold this close to a higher edge (a riser, a pit wall) is refused
 WALL_HEIGHT_M = 0.01  # ... when the top of that edge is this much higher [m]
 HAZARD_GRID_M = 0.003  # sampling step of the sharp terrain around a foothold [m]
+MAX_SUPPORT_TILT_RAD = np.radians(30.0)  # the body follows the footholds' plane up to this tilt
+BODY_TARGET_CLEARANCE_M = 0.02  # body target: box bottom this high over the terrain (as Theta2)
+BODY_FOOTPRINT_GRID_M = 0.01  # sampling of the terrain under the body box (a thin barrier)
 
 
 class _Terrain(Protocol):
@@ -130,6 +135,7 @@ def lambda_c(
     i_f: int,
     d_c_m: float | None = None,
     shrink: float = 0.0,
+    feet_plane_W: ArrayLike | None = None,
 ) -> _Array:
     """Body target r_c* = Lambda_c(Psi, i_f) (section 8.2.1, eq. 12).
 
@@ -142,7 +148,8 @@ def lambda_c(
     Step 2: lift to ``d_c_m`` above the terrain, r_c* = (x, y, height(x, y) + d_c); where
     the terrain under r_c^+ is lower than the support feet (a gap, a hole, a pit between
     stones) the body would sink into it, so the height lifted from is the higher of
-    height(x, y) and the support centroid's z.
+    height(x, y) and the support centroid's z. With ``feet_plane_W`` (footholds, beyond the
+    paper) the height follows the footholds instead (:func:`support_body_target_W`).
 
     Parameters
     ----------
@@ -158,6 +165,8 @@ def lambda_c(
         Height above the terrain [m]; default the nominal standing height.
     shrink : float
         Fraction of the way from the centroid to the incentre, in [0, 1].
+    feet_plane_W : array_like, shape (4, 3), optional
+        Footholds (contact points, one per leg) whose plane the body height follows.
 
     Returns
     -------
@@ -171,9 +180,79 @@ def lambda_c(
     r = support_centroid_W(state, i_f)
     if shrink > 0.0:
         r = (1.0 - shrink) * r + shrink * support_incentre_W(state, i_f)
+    if feet_plane_W is not None:
+        heading = state.base_rotation_W[:, 0]
+        up = np.array([0.0, 0.0, 1.0])  # the height does not depend on the roll
+        z, _ = support_body_target_W(robot, terrain, feet_plane_W, r, d_c, heading, up)
+        return np.array([r[0], r[1], z])
     z = float(np.asarray(terrain.height(r[0], r[1]), dtype=float))
     z = max(z, float(support_centroid_W(state, i_f)[2]))  # over a gap: from the feet
     return np.array([r[0], r[1], z + d_c])
+
+
+def support_plane_W(points_W: ArrayLike) -> tuple[_Array, _Array]:
+    """Least-squares plane z = c_z + g . (xy - c_xy) through points: (gradient g, centre c)."""
+    P = np.asarray(points_W, dtype=float).reshape(-1, 3)
+    c = P.mean(axis=0)
+    g, *_ = np.linalg.lstsq(P[:, :2] - c[:2], P[:, 2] - c[2], rcond=None)
+    return np.asarray(g, float), c
+
+
+def support_body_target_W(
+    robot: Robot,
+    terrain,
+    feet_W: ArrayLike,
+    xy: ArrayLike,
+    d_c_m: float,
+    heading_W: ArrayLike,
+    terrain_normal_W: ArrayLike,
+) -> tuple[float, _Array]:
+    """COM height over ``xy`` and body normal that follow the footholds (issue 15 item 2).
+
+    Beyond the paper, whose body is d_c above the terrain under it and parallel to the
+    terrain's smoothed normal (sections 7.2, 8.2.1): over a step the terrain under the
+    body is flat on either side of the edge while the feet that carry it stand on both
+    levels. Here each leg asks for the body where its foot (contact point of ``feet_W``,
+    all four legs) sits at its standing position (theta_nor) in the body frame: the body
+    origin over that foot's point of the body, the standing height above the foot. The
+    least-squares plane through those four points (the body's xy at ``xy``, yawed along
+    ``heading_W``) gives the origin's height at ``xy`` and the body's pitch, at most
+    ``MAX_SUPPORT_TILT_RAD``; the roll stays the terrain's (``terrain_normal_W``): with one
+    foot on another level a plane through the feet also rolls the body, which helps no leg.
+    Climbing or descending, the body pitches and sits between the levels, and front and
+    hind legs bend alike instead of one pair being stretched and the other folded. The
+    height is raised where the body box (its footprint around ``xy``) would come nearer
+    than ``BODY_TARGET_CLEARANCE_M`` to the highest terrain under it (a barrier, an edge).
+    Returns (COM height [m], unit normal u_n).
+    """
+    feet = np.asarray(feet_W, dtype=float).reshape(4, 3)
+    f_B = kinematics_of(robot).feet_B(robot.theta_nor)
+    ex = np.asarray(heading_W, float)[:2]
+    ex = ex / max(float(np.linalg.norm(ex)), 1e-9)
+    ey = np.array([-ex[1], ex[0]])
+    x, y = float(xy[0]), float(xy[1])
+    pts = np.column_stack(
+        [
+            x + f_B[:, 0] * ex[0] + f_B[:, 1] * ey[0],
+            y + f_B[:, 0] * ex[1] + f_B[:, 1] * ey[1],
+            feet[:, 2] + robot.foot_radius_m - f_B[:, 2],
+        ]
+    )
+    g, c = support_plane_W(pts)
+    z = c[2] + float(g @ (np.array([x, y]) - c[:2])) + float(d_c_m) - nominal_height_m(robot)
+    limit = float(np.tan(MAX_SUPPORT_TILT_RAD))
+    pitch_slope = float(np.clip(g @ ex, -limit, limit))
+    n_t = np.asarray(terrain_normal_W, float)
+    roll_slope = -float(n_t[:2] @ ey) / max(float(n_t[2]), 1e-9)
+    grad = pitch_slope * ex + roll_slope * ey
+    n = np.array([-grad[0], -grad[1], 1.0])
+    lo, hi = np.asarray(robot.body_box_B, float)
+    nu, nv = (int(np.ceil((hi[k] - lo[k]) / BODY_FOOTPRINT_GRID_M)) + 1 for k in (0, 1))
+    u, v = np.meshgrid(np.linspace(lo[0], hi[0], nu), np.linspace(lo[1], hi[1], nv))
+    X = x + u * ex[0] + v * ey[0]
+    Y = y + u * ex[1] + v * ey[1]
+    top = float(np.max(terrain.height_sharp(X.ravel(), Y.ravel())))
+    return max(z, top - float(lo[2]) + BODY_TARGET_CLEARANCE_M), n / np.linalg.norm(n)
 
 
 # ---- reference directions and the body pose on tau (sections 7.2-7.3) -----------------------
@@ -300,6 +379,7 @@ def foothold_hazard(
     radius_m: float,
     mu: float = 0.7,
     edge_margin_m: float = EDGE_MARGIN_M,
+    forward_W: ArrayLike | None = None,
 ) -> str:
     """Why a contact point is a poor foothold, or "" when it is a good one.
 
@@ -309,7 +389,11 @@ def foothold_hazard(
     which covers every step, riser, gap and stone edge). Refused: an edge within
     ``radius_m + edge_margin_m`` (the foot would rest on or slip off it), or an edge within
     ``WALL_RADIUS_M`` whose top is ``WALL_HEIGHT_M`` above the point (a toe against a riser
-    or at the bottom of a pit). Smooth ground, however rough, has no edge.
+    or at the bottom of a pit). With ``forward_W`` (the walking direction) only such walls
+    ahead of the point or beside it count: one behind it is the edge the leg has just
+    stepped down from, which the foot leaves behind and whose clearance from the leg's
+    links the planner checks exactly (the wall rule kept a front foot 4 cm from the riser
+    of an 8 cm step down, out of the leg's reach). Smooth ground, however rough, has no edge.
     """
     p = np.asarray(point_W, float).reshape(3)
     r_edge = float(radius_m) + float(edge_margin_m)
@@ -329,6 +413,9 @@ def foothold_hazard(
     if np.any(edge & (R <= r_edge)):
         return f"an edge within {r_edge * 100:.1f} cm"
     near = edge & (R <= WALL_RADIUS_M)
+    if forward_W is not None:
+        f, _ = horizontal_axes(forward_W)
+        near &= (X - p[0]) * f[0] + (Y - p[1]) * f[1] >= -float(radius_m)
     h0 = float(np.asarray(terrain.height_sharp(p[0], p[1]), float))
     if np.any(near) and float(H[near].max()) > h0 + WALL_HEIGHT_M:
         return (
@@ -388,7 +475,7 @@ def safe_foothold(
         if not_behind_W is not None and float((c - np.asarray(not_behind_W, float)) @ f) <= 0:
             continue
         c[2] = float(np.asarray(terrain.height(c[0], c[1]), float))
-        why = foothold_hazard(terrain, c, radius_m, mu)
+        why = foothold_hazard(terrain, c, radius_m, mu, forward_W=f)
         if not why:
             return c, ""
         first = first or why

@@ -5,16 +5,21 @@ import pinocchio as pin
 import pytest
 
 from planner.heuristics import (
+    BODY_TARGET_CLEARANCE_M,
+    MAX_SUPPORT_TILT_RAD,
     body_pose_on_trajectory,
     default_step_m,
+    frame_from_directions,
     lambda_c,
     lambda_t,
     nominal_height_m,
     normal_smoothing_radius_m,
     reference_directions,
+    support_body_target_W,
     support_centroid_W,
     support_incentre_W,
 )
+from planner.kinematics import kinematics_of
 from planner.state import State
 from planner.trajectory import Trajectory
 
@@ -194,3 +199,85 @@ def test_body_pose_and_reference_directions_on_a_slope(littledog, source):
         # the closest-lambda form gives the same u_f for a point on the path
         u_f2, _ = reference_directions(tau, terrain, p, radius)
         np.testing.assert_allclose(u_f2, u_f, atol=1e-6)
+
+
+# ---- the body follows its footholds (issue 15 item 2) ---------------------------------------
+def _step_terrain(height):
+    from planner.terrain import Terrain
+
+    return Terrain.from_spec(
+        {"name": "step", "friction": 0.7, "x_min": -0.5, "length": 2.0, "kind": "step",
+         "x": 0.0, "height": height}
+    )  # fmt: skip
+
+
+def test_support_target_on_level_feet_is_the_standing_pose(littledog):
+    terrain = _real("flat")
+    feet = kinematics_of(littledog).feet_B(littledog.theta_nor) + [0.3, 0.0, 0.0]
+    feet[:, 2] = 0.0
+    d_c = 0.147
+    z, n = support_body_target_W(littledog, terrain, feet, [0.3, 0.0], d_c, [1, 0, 0], [0, 0, 1])
+    assert z == pytest.approx(d_c, abs=1e-12)  # d_c over the ground, as Lambda_c
+    np.testing.assert_allclose(n, [0, 0, 1], atol=1e-12)
+
+
+@pytest.mark.parametrize("rise", [0.1, -0.08])
+def test_support_target_pitches_with_a_step_and_sits_between_the_levels(littledog, rise):
+    """Front feet on one level, hind feet on the other (a step at x = 0)."""
+    terrain = _step_terrain(rise)
+    f_B = kinematics_of(littledog).feet_B(littledog.theta_nor)
+    feet = f_B.copy()
+    feet[:, 2] = [rise, rise, 0.0, 0.0]
+    h = nominal_height_m(littledog)
+    z, n = support_body_target_W(littledog, terrain, feet, [0.0, 0.0], h, [1, 0, 0], [0, 0, 1])
+    spacing = f_B[0, 0] - f_B[2, 0]
+    assert n[1] == pytest.approx(0.0, abs=1e-12)  # no roll
+    assert -n[0] / n[2] == pytest.approx(rise / spacing, rel=1e-9)  # pitched by the rise
+    assert z == pytest.approx(0.5 * rise + h, abs=1e-12)  # between the levels
+    # independent: at that pose each hip (Pinocchio) stands about as high over its foot
+    R = frame_from_directions(np.array([1.0, 0.0, 0.0]), n)
+    p = np.array([0.0, 0.0, z])
+    data = littledog.model.createData()
+    q = littledog.q_from(p, pin.Quaternion(R).coeffs(), littledog.theta_nor)
+    pin.forwardKinematics(littledog.model, data, q)
+    hip_z = [data.oMi[littledog.model.getJointId(lg.joint_names[0])].translation[2]
+             for lg in littledog.legs]  # fmt: skip
+    over = np.array(hip_z) - feet[:, 2]
+    assert np.ptp(over) <= 0.15 * abs(rise)  # a level body would differ by |rise|
+
+
+def test_support_target_keeps_the_terrain_roll_and_clears_a_barrier(littledog):
+    from planner.terrain import Terrain
+
+    barrier = Terrain.from_spec(
+        {"name": "b", "friction": 0.7, "x_min": -0.5, "length": 2.0, "kind": "barrier",
+         "x": 0.0, "height": 0.1, "thickness": 0.03}
+    )  # fmt: skip
+    feet = kinematics_of(littledog).feet_B(littledog.theta_nor)
+    feet[:, 2] = 0.0
+    tilt = np.array([0.0, -0.2, 1.0]) / np.hypot(0.2, 1.0)
+    z, n = support_body_target_W(littledog, barrier, feet, [0.0, 0.0], 0.147, [1, 0, 0], tilt)
+    np.testing.assert_allclose(n, tilt, atol=1e-12)  # level feet: the terrain's roll stays
+    lo = np.asarray(littledog.body_box_B)[0]
+    assert z == pytest.approx(0.1 - lo[2] + BODY_TARGET_CLEARANCE_M, abs=1e-9)
+
+
+def test_support_tilt_is_bounded(littledog):
+    terrain = _step_terrain(0.5)
+    feet = kinematics_of(littledog).feet_B(littledog.theta_nor)
+    feet[:, 2] = [0.5, 0.5, 0.0, 0.0]
+    _, n = support_body_target_W(littledog, terrain, feet, [0.0, 0.0], 0.15, [1, 0, 0], [0, 0, 1])
+    assert np.arccos(n[2]) == pytest.approx(MAX_SUPPORT_TILT_RAD, abs=1e-9)
+
+
+def test_lambda_c_with_footholds_follows_them(littledog):
+    terrain = _step_terrain(0.1)
+    f_B = kinematics_of(littledog).feet_B(littledog.theta_nor)
+    st = _state_on(_real("flat"), f_B[:, :2])
+    feet = st.feet_W.copy()
+    feet[:2, 2] = 0.1
+    st.feet_W = feet
+    paper = lambda_c(littledog, terrain, st, 3)
+    follow = lambda_c(littledog, terrain, st, 3, feet_plane_W=feet)
+    np.testing.assert_allclose(follow[:2], paper[:2], atol=1e-15)  # same xy (eq. 12)
+    assert follow[2] < paper[2]  # between the levels, not over the step top

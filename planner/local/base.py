@@ -20,7 +20,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from planner import interrupts
-from planner.footholds import foothold_candidates
+from planner.footholds import best_and_shortest, foothold_candidates
 from planner.heuristics import (
     EDGE_MARGIN_M,
     foothold_hazard,
@@ -30,6 +30,7 @@ from planner.heuristics import (
     nominal_height_m,
     reference_directions,
     safe_foothold,
+    support_body_target_W,
 )
 from planner.interpolate import default_clearance_m, interpolate_leaf, interpolate_swing
 from planner.kinematics import kinematics_of
@@ -53,6 +54,7 @@ KNEE_CHOICE_EDGE_M = 0.06  # ... next to an edge this much higher than the footh
 KNEE_CHOICE_LOOKAHEAD = 0.5  # fraction of a stride the body is moved ahead to judge it
 KNEE_CHOICE_FOOT_ZONE_M = 0.03  # (link points this near the foot centre do not count)
 OTHER_FOOTHOLDS = 8  # footholds tried when the body cannot get ready for Lambda_t's
+CANDIDATE_POOL = 40  # candidates scored before the best and the shortest are picked
 TARGET_RADIUS_M = 0.01  # a placed foot lands within this of its (edge-free) target [m]
 WIDE_TARGET_RADIUS_M = 0.04  # ... or this, when the leg's links forbid the near footholds
 TORQUE_FRACTION = 0.8  # joint torque / URDF effort the servos may need to hold a sample
@@ -77,6 +79,8 @@ class LocalSettings:
     max_fails_in_row : failed step attempts in a row after which the planner is stuck.
     no_progress_cycles : cycles without the COM coming ``PROGRESS_M`` nearer the goal after
         which the planner is stuck (steps in place before an obstacle, some failing).
+    follow_support : the body's height and tilt follow the plane of the footholds it will
+        stand on (issue 15 item 2); False: the paper's, over the terrain under the body.
     """
 
     gait: tuple[int, ...] = CRAWL
@@ -94,6 +98,7 @@ class LocalSettings:
     max_fails_in_row: int = 8
     no_progress_cycles: int = 32
     balance_margin_frac: float = 0.01
+    follow_support: bool = True
     theta: ThetaOptions = field(default_factory=ThetaOptions)
 
 
@@ -297,26 +302,60 @@ class LocalPlanner:
         """Footholds to try when the body cannot get ready for ``tried_W`` (issue 15 item 1).
 
         :func:`planner.footholds.foothold_candidates` around ``tried_W`` at the body pose
-        the move aims for (COM at r_c*), best first, ``tried_W`` itself left out.
+        the move aims for (COM at r_c*), ``tried_W`` itself left out, best-scored and
+        shortest alternating (:func:`planner.footholds.best_and_shortest`).
         """
         rc = self.body_target(state, leg, shrink)
-        u_f, u_n = reference_directions(tau, self.terrain, rc)
+        u_f, u_n = self.body_directions(tau, state, rc, leg)
         R = frame_from_directions(u_f, u_n)
         body_W = rc - R @ self.kin.com_B(state.joints_rad, self.settings.theta.whole_body_com)
         tried = np.asarray(tried_W, float)
-        return [
+        found = [
             c
             for c in foothold_candidates(
                 self.robot, self.terrain, leg, tried, u_f, body_W, R, self.mu,
-                not_behind_W=state.feet_W[leg], limit=OTHER_FOOTHOLDS + 1,
+                not_behind_W=state.feet_W[leg], limit=CANDIDATE_POOL,
             )
             if np.linalg.norm(c[:2] - tried[:2]) > TARGET_RADIUS_M
-        ][:OTHER_FOOTHOLDS]  # fmt: skip
+        ]  # fmt: skip
+        return best_and_shortest(found, state.feet_W[leg], u_f, OTHER_FOOTHOLDS)
 
-    def body_target(self, state: State, leg: int, shrink: float | None = None) -> np.ndarray:
-        """r_c* = Lambda_c(Psi, i_f) (eq. 12) at the nominal COM height, with ``shrink``."""
+    def body_target(
+        self, state: State, leg: int, shrink: float | None = None, swing_target_W=None
+    ) -> np.ndarray:
+        """r_c* = Lambda_c(Psi, i_f) (eq. 12) at the nominal COM height, with ``shrink``.
+
+        With ``follow_support`` the height follows the four footholds
+        (:func:`support_body_target_W`), ``leg``'s replaced by its next one
+        ``swing_target_W`` when given (the landing-ready body move).
+        """
         k = self.settings.shrink if shrink is None else shrink
-        return lambda_c(self.robot, self.terrain, state, leg, d_c_m=self.com_height_m(), shrink=k)
+        feet = self._plane_feet(state, leg, swing_target_W)
+        return lambda_c(self.robot, self.terrain, state, leg, self.com_height_m(), k, feet)
+
+    def _plane_feet(self, state: State, leg: int, swing_target_W=None):
+        """The footholds the body follows, or None (the paper's u_n and height)."""
+        if not self.settings.follow_support:
+            return None
+        feet = np.array(state.feet_W, float)
+        if swing_target_W is not None:
+            feet[leg] = np.asarray(swing_target_W, float)
+        return feet
+
+    def body_directions(self, tau: Trajectory, state: State, rc, leg: int, swing_target_W=None):
+        """(u_f, u_n) of sigma1, sigma2 for the body move at r_c* before ``leg`` swings.
+
+        u_f along tau; u_n the terrain's smoothed normal (section 7.2) or, with
+        ``follow_support``, pitched with the footholds (:func:`support_body_target_W`).
+        """
+        u_f, u_n = reference_directions(tau, self.terrain, rc)
+        feet = self._plane_feet(state, leg, swing_target_W)
+        if feet is not None:
+            heading = state.base_rotation_W[:, 0]
+            _, u_n = support_body_target_W(
+                self.robot, self.terrain, feet, rc, self.com_height_m(), heading, u_n
+            )
+        return u_f, u_n
 
     def body_move(
         self,
@@ -332,8 +371,8 @@ class LocalPlanner:
         foothold (Theta2's swing-ready constraint).
         """
         support = tuple(i for i in range(4) if i != leg)
-        rc = self.body_target(state, leg, shrink)
-        u_f, u_n = reference_directions(tau, self.terrain, rc)
+        rc = self.body_target(state, leg, shrink, swing_target_W)
+        u_f, u_n = self.body_directions(tau, state, rc, leg, swing_target_W)
         landing = swing_target_W is not None
         sol = self.theta2(support, landing).solve(state, rc, u_f, u_n, swing_target_W)
         self._count("theta2", sol.feasible)
@@ -451,6 +490,7 @@ class LocalPlanner:
             self.robot.foot_radius_m,
             self.mu,
             EDGE_MARGIN_M - TARGET_RADIUS_M,
+            forward_W=reference_directions(tau, self.terrain, touch.feet_W[leg])[0],
         )
         if hazard:
             sol.feasible = False
