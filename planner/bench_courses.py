@@ -28,7 +28,10 @@ from planner.outputs import write_atomic
 
 __all__ = [
     "COURSES",
+    "HARD_COURSES",
     "PLANNERS",
+    "expand_courses",
+    "goal_for",
     "add_courses_parser",
     "cmd_courses",
     "course_jobs",
@@ -47,12 +50,36 @@ COURSES = (
     "stepping_stones",
     "barrier75mm",
 )
+# issue 15's harder courses, at the limits of LittleDog's 18 cm legs
+HARD_COURSES = (
+    "trench12cm",
+    "incline18",
+    "barrier9cm",
+    "step10cm",
+    "stepdown8cm",
+    "stairs_down",
+    "sparse_stones",
+    "mix4m",
+)
+COURSE_GOALS = {"mix4m": (4.2, 0.0)}  # courses longer than the 2 m walk
 PLANNERS = ("soft", "recursive")
 ROBOTS = ("littledog",)
 START_XY = (0.2, 0.0)
 GOAL_XY = (2.2, 0.0)
 # [s] per plan: since the rolling feet and per-sample torque checks planning is ~5x slower
 TIME_BUDGET_S = 240.0
+
+
+def expand_courses(names) -> tuple[str, ...]:
+    """Course names with the groups 'named' (:data:`COURSES`) and 'hard' spelled out."""
+    groups = {"named": COURSES, "hard": HARD_COURSES}
+    return tuple(dict.fromkeys(c for n in names for c in groups.get(n, (n,))))
+
+
+def goal_for(course: str, default=GOAL_XY) -> tuple[float, float]:
+    """The goal of a named course's walk: ``COURSE_GOALS`` or ``default``."""
+    g = COURSE_GOALS.get(course, default)
+    return float(g[0]), float(g[1])
 
 
 def course_jobs(
@@ -72,7 +99,7 @@ def course_jobs(
             "terrain": c,
             "planner": p,
             "start": [float(start_xy[0]), float(start_xy[1])],
-            "goal": [float(goal_xy[0]), float(goal_xy[1])],
+            "goal": list(goal_for(c, goal_xy)),
             "seed": int(seed),
             "time_budget_s": float(time_budget_s),
         }
@@ -173,7 +200,9 @@ def render_markdown(result: dict[str, Any]) -> str:
     lines = [
         "# Course benchmark (`stratawalk bench courses`)",
         "",
-        f"Walks from {tuple(c['start'])} to {tuple(c['goal'])} m, time budget "
+        f"Walks from {tuple(c['start'])} to {tuple(c['goal'])} m"
+        + "".join(f" ({k}: to {v})" for k, v in COURSE_GOALS.items() if k in c["courses"])
+        + ", time budget "
         f"{c['time_budget_s']:g} s each, {c['workers']} jobs at once"
         + (f" on the Dask cluster {c['scheduler']}" if c["scheduler"] else "")
         + f"; {m['nproc']} cores ({m['cpu'] or 'cpu unknown'}), load at start "
@@ -224,7 +253,11 @@ def add_courses_parser(bench_sub) -> argparse.ArgumentParser:
     """Add ``bench courses`` to the ``bench`` subcommands."""
     p = bench_sub.add_parser("courses", help="robots x courses x planners: reached, steps, times")
     p.add_argument("--robots", default=",".join(ROBOTS), help="comma-separated names")
-    p.add_argument("--courses", default=",".join(COURSES), help="comma-separated terrains")
+    p.add_argument(
+        "--courses",
+        default="named,hard",
+        help="comma-separated terrains; 'named' = the 9 first courses, 'hard' = issue 15's 8",
+    )
     p.add_argument("--planners", default=",".join(PLANNERS), help="soft,hard,recursive")
     p.add_argument("--time-budget", type=float, default=TIME_BUDGET_S, help="[s] per walk")
     p.add_argument("--out", default="bench/results", help="output folder")
@@ -256,7 +289,7 @@ def cmd_courses(args) -> int:
         raise InputError(f"--time-budget: must be > 0 s, got {args.time_budget}")
     result = run_course_bench(
         robots=names(args.robots, "robots"),
-        courses=names(args.courses, "courses"),
+        courses=expand_courses(names(args.courses, "courses")),
         planners=planners,
         time_budget_s=args.time_budget,
         out_dir=args.out,

@@ -40,7 +40,7 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
-from planner.bench_courses import COURSES, GOAL_XY, START_XY
+from planner.bench_courses import COURSES, GOAL_XY, START_XY, expand_courses, goal_for
 from planner.errors import InputError
 from planner.outputs import write_atomic
 
@@ -105,7 +105,7 @@ def physics_jobs(
     for name in names:
         parsed = parse_course_name(name)
         if parsed is None:
-            terrain, goal, group = name, named_goal_xy, "named"
+            terrain, goal, group = name, goal_for(name, named_goal_xy), "named"
         else:
             spec = generate_course(parsed[0], parsed[2], parsed[1])
             terrain = str(write_course(spec, Path(out_dir) / "courses").resolve())
@@ -512,7 +512,11 @@ def add_physics_parser(bench_sub) -> argparse.ArgumentParser:
     p = bench_sub.add_parser(
         "physics", help="plan each course, execute in MuJoCo: open loop, feedback, correction"
     )
-    p.add_argument("--courses", default=",".join(COURSES), help="comma-separated terrains")
+    p.add_argument(
+        "--courses",
+        default="named",
+        help="comma-separated terrains; 'named' = the 9 first courses, 'hard' = issue 15's 8",
+    )
     p.add_argument("--generated", type=int, default=GENERATED, help="generated courses, seeds 0..")
     p.add_argument("--difficulty", type=float, default=1.0, help="of the generated courses, 0..1")
     p.add_argument("--modes", default=",".join(MODES), help="open,feedback,correct")
@@ -537,7 +541,7 @@ def cmd_physics(args) -> int:
     check_folder(args.out, "--out")
     from planner.course_gen import parse_course_name
 
-    courses = _names(args.courses)
+    courses = expand_courses(_names(args.courses))
     modes = _names(args.modes)
     bad = [m for m in modes if m not in MODES]
     if bad:

@@ -136,6 +136,7 @@ def lambda_c(
     d_c_m: float | None = None,
     shrink: float = 0.0,
     feet_plane_W: ArrayLike | None = None,
+    heading_W: ArrayLike | None = None,
 ) -> _Array:
     """Body target r_c* = Lambda_c(Psi, i_f) (section 8.2.1, eq. 12).
 
@@ -167,6 +168,8 @@ def lambda_c(
         Fraction of the way from the centroid to the incentre, in [0, 1].
     feet_plane_W : array_like, shape (4, 3), optional
         Footholds (contact points, one per leg) whose plane the body height follows.
+    heading_W : array_like, shape (3,), optional
+        The body's forward direction there (tau's u_f); default its current x axis.
 
     Returns
     -------
@@ -181,7 +184,7 @@ def lambda_c(
     if shrink > 0.0:
         r = (1.0 - shrink) * r + shrink * support_incentre_W(state, i_f)
     if feet_plane_W is not None:
-        heading = state.base_rotation_W[:, 0]
+        heading = state.base_rotation_W[:, 0] if heading_W is None else heading_W
         up = np.array([0.0, 0.0, 1.0])  # the height does not depend on the roll
         z, _ = support_body_target_W(robot, terrain, feet_plane_W, r, d_c, heading, up)
         return np.array([r[0], r[1], z])
@@ -246,13 +249,14 @@ def support_body_target_W(
     roll_slope = -float(n_t[:2] @ ey) / max(float(n_t[2]), 1e-9)
     grad = pitch_slope * ex + roll_slope * ey
     n = np.array([-grad[0], -grad[1], 1.0])
+    n /= np.linalg.norm(n)
     lo, hi = np.asarray(robot.body_box_B, float)
     nu, nv = (int(np.ceil((hi[k] - lo[k]) / BODY_FOOTPRINT_GRID_M)) + 1 for k in (0, 1))
     u, v = np.meshgrid(np.linspace(lo[0], hi[0], nu), np.linspace(lo[1], hi[1], nv))
     X = x + u * ex[0] + v * ey[0]
     Y = y + u * ex[1] + v * ey[1]
     top = float(np.max(terrain.height_sharp(X.ravel(), Y.ravel())))
-    return max(z, top - float(lo[2]) + BODY_TARGET_CLEARANCE_M), n / np.linalg.norm(n)
+    return max(z, top - float(lo[2]) + BODY_TARGET_CLEARANCE_M), n
 
 
 # ---- reference directions and the body pose on tau (sections 7.2-7.3) -----------------------

@@ -37,6 +37,14 @@ NAMED = [
     "rocks",
     "logs",
     "course_rough",
+    "trench12cm",
+    "incline18",
+    "barrier9cm",
+    "step10cm",
+    "stepdown8cm",
+    "stairs_down",
+    "sparse_stones",
+    "mix4m",
 ]
 W = 0.005  # default smoothing width
 

@@ -281,7 +281,7 @@ class LocalPlanner:
         moves it to the nearest point of the sharp terrain without an edge under the foot
         (beyond the paper). ``hazard`` is "" or why no safe point was found nearby.
         """
-        rc = self.body_target(state, leg, shrink)
+        rc = self.body_target(state, leg, shrink, tau=tau)
         ahead = state.copy()
         ahead.base_position_W = np.array(rc, float)
         target = lambda_t(self.robot, self.terrain, ahead, leg, tau, step_m=step_m)
@@ -305,7 +305,7 @@ class LocalPlanner:
         the move aims for (COM at r_c*), ``tried_W`` itself left out, best-scored and
         shortest alternating (:func:`planner.footholds.best_and_shortest`).
         """
-        rc = self.body_target(state, leg, shrink)
+        rc = self.body_target(state, leg, shrink, tau=tau)
         u_f, u_n = self.body_directions(tau, state, rc, leg)
         R = frame_from_directions(u_f, u_n)
         body_W = rc - R @ self.kin.com_B(state.joints_rad, self.settings.theta.whole_body_com)
@@ -321,25 +321,35 @@ class LocalPlanner:
         return best_and_shortest(found, state.feet_W[leg], u_f, OTHER_FOOTHOLDS)
 
     def body_target(
-        self, state: State, leg: int, shrink: float | None = None, swing_target_W=None
+        self,
+        state: State,
+        leg: int,
+        shrink: float | None = None,
+        swing_target_W=None,
+        tau: Trajectory | None = None,
     ) -> np.ndarray:
         """r_c* = Lambda_c(Psi, i_f) (eq. 12) at the nominal COM height, with ``shrink``.
 
         With ``follow_support`` the height follows the four footholds
-        (:func:`support_body_target_W`), ``leg``'s replaced by its next one
-        ``swing_target_W`` when given (the landing-ready body move).
+        (:func:`support_body_target_W`), ``leg``'s halfway to its next one
+        ``swing_target_W`` when given (the landing-ready body move ends with the leg still
+        on its foothold, and from there it must reach the next one), the body facing
+        along ``tau`` (not its current heading: a yaw would feed back into the target).
         """
         k = self.settings.shrink if shrink is None else shrink
         feet = self._plane_feet(state, leg, swing_target_W)
-        return lambda_c(self.robot, self.terrain, state, leg, self.com_height_m(), k, feet)
+        heading = None
+        if tau is not None:
+            heading = tau.tangent(tau.closest_lambda(state.base_position_W))
+        return lambda_c(self.robot, self.terrain, state, leg, self.com_height_m(), k, feet, heading)
 
     def _plane_feet(self, state: State, leg: int, swing_target_W=None):
         """The footholds the body follows, or None (the paper's u_n and height)."""
         if not self.settings.follow_support:
             return None
         feet = np.array(state.feet_W, float)
-        if swing_target_W is not None:
-            feet[leg] = np.asarray(swing_target_W, float)
+        if swing_target_W is not None:  # the leg still stands at its foothold: halfway
+            feet[leg] = 0.5 * (feet[leg] + np.asarray(swing_target_W, float))
         return feet
 
     def body_directions(self, tau: Trajectory, state: State, rc, leg: int, swing_target_W=None):
@@ -351,9 +361,8 @@ class LocalPlanner:
         u_f, u_n = reference_directions(tau, self.terrain, rc)
         feet = self._plane_feet(state, leg, swing_target_W)
         if feet is not None:
-            heading = state.base_rotation_W[:, 0]
             _, u_n = support_body_target_W(
-                self.robot, self.terrain, feet, rc, self.com_height_m(), heading, u_n
+                self.robot, self.terrain, feet, rc, self.com_height_m(), u_f, u_n
             )
         return u_f, u_n
 
@@ -371,7 +380,7 @@ class LocalPlanner:
         foothold (Theta2's swing-ready constraint).
         """
         support = tuple(i for i in range(4) if i != leg)
-        rc = self.body_target(state, leg, shrink, swing_target_W)
+        rc = self.body_target(state, leg, shrink, swing_target_W, tau)
         u_f, u_n = self.body_directions(tau, state, rc, leg, swing_target_W)
         landing = swing_target_W is not None
         sol = self.theta2(support, landing).solve(state, rc, u_f, u_n, swing_target_W)
