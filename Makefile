@@ -19,7 +19,8 @@ test: $(STAMP)
 	$(PY) -m pytest -q
 
 # Theta1-4: IPOPT (exact derivatives) vs SLSQP (finite differences); ~4 min on 2 cores
-# courses: LittleDog x 9 courses x soft/recursive, 2 m walks, 240 s budget; ~30 min on 2 cores
+# courses: LittleDog x 17 courses (9 named, 8 of issue 15) x soft/recursive, 240 s budget;
+#   ~60 min on 2 cores
 # physics: 9 courses + 20 generated, plan then MuJoCo open/feedback/correct at time scale 1;
 #   ~90 min on 2 cores (a 2 m plan takes 30-60 s since the rolling feet; see the README)
 bench: $(STAMP)

@@ -57,7 +57,7 @@ def foothold_candidates(
     mu: float,
     not_behind_W: ArrayLike | None = None,
     max_back_m: float | None = None,
-    max_ahead_m: float = 0.09,
+    max_ahead_m: float | None = None,
     max_lateral_m: float = 0.05,
     min_spacing_m: float = 0.02,
     limit: int = 6,
@@ -81,6 +81,8 @@ def foothold_candidates(
     reach = float(robot.reach_m[leg])
     rho = float(robot.foot_radius_m)
 
+    if max_ahead_m is None:  # a leg's reach beyond the target (the far side of a trench)
+        max_ahead_m = float(robot.reach_m[leg])
     if max_back_m is None:  # back to the foot (the nearest safe point past an edge), or 6 cm
         max_back_m = DEFAULT_BACK_M
         if not_behind_W is not None:

@@ -49,6 +49,7 @@ def omega(
     tol_m: float = 0.004,
     max_solves: int = 10,
     swing_target_W: np.ndarray | None = None,
+    targets=None,
 ) -> SearchResult:
     """Bisection for the largest lambda in [lam_from, lam_to] where Theta1 is feasible.
 
@@ -70,6 +71,9 @@ def omega(
         Budget of Theta1 solves.
     swing_target_W : (3,), optional
         Next foothold of the leg that will swing (Theta2's swing-ready constraint).
+    targets : callable, optional
+        lambda -> (r_c*, u_f, u_n), replacing R_tau(lambda) + ``com_offset_W`` and
+        :func:`planner.heuristics.reference_directions` (a body that follows its footholds).
 
     """
     offset = np.zeros(3) if com_offset_W is None else np.asarray(com_offset_W, float)
@@ -78,8 +82,11 @@ def omega(
 
     def probe(lam: float) -> bool:
         nonlocal warm
-        rc = np.asarray(tau.point(lam), float).reshape(3) + offset
-        u_f, u_n = reference_directions(tau, problem.terrain, rc, lam=lam)
+        if targets is not None:
+            rc, u_f, u_n = targets(lam)
+        else:
+            rc = np.asarray(tau.point(lam), float).reshape(3) + offset
+            u_f, u_n = reference_directions(tau, problem.terrain, rc, lam=lam)
         sol = problem.solve(warm, rc, u_f, u_n, swing_target_W)
         out.probes.append((float(lam), sol.feasible))
         if sol.feasible:

@@ -100,3 +100,29 @@ def test_joint_space_swing_refuses_a_moving_body(littledog, over_the_barrier):
     moved = touch.copy()
     moved.base_position_W = moved.base_position_W + [0.01, 0.0, 0.0]
     assert joint_space_swing(littledog, terrain, lift, moved, 24, 0) is None
+
+
+def test_a_swing_searched_around_an_edge_is_timed_slower(littledog, over_the_barrier):
+    """The planner's joint-space swing is tagged and timed at OVER_EDGE_SPEED_FRACTION of
+    the URDF speed limits (the servos' lag must stay under its millimetres of clearance)."""
+    from planner.local.base import JOINT_SPEED_FRACTION, OVER_EDGE_SPEED_FRACTION, Step
+    from planner.local.soft import SoftPlanner
+
+    terrain, lift, touch = over_the_barrier
+    planner = SoftPlanner(littledog, terrain)
+    path, _ = planner._joint_space_swing(lift, touch, 0)  # (this stance is not balanced)
+    assert path is not None and all(s.info.get("over_edge") for s in path)
+    _, slow = planner.durations(Step(0, True, lift, None, touch, [], path))
+    plain = [s.copy() for s in path]
+    for s in plain:
+        s.info.pop("over_edge")
+    _, fast = planner.durations(Step(0, True, lift, None, touch, [], plain))
+    # independently: the largest joint step over the URDF velocity limit
+    vmax = np.asarray(littledog.model.velocityLimit, float)[-12:]
+    th = np.array([s.joints_rad.ravel() for s in path])
+    least = (np.abs(np.diff(th, axis=0)) / vmax).max() * (len(path) - 1)
+    assert slow == pytest.approx(
+        max(planner.settings.swing_time_s, least / OVER_EDGE_SPEED_FRACTION)
+    )
+    assert fast == pytest.approx(max(planner.settings.swing_time_s, least / JOINT_SPEED_FRACTION))
+    assert slow > fast

@@ -252,3 +252,21 @@ def test_theta2_keeps_leg_links_off_the_terrain(dog, name, x):
     for c, w in enumerate(wit):
         need = 0.0 if w is None else w.need_m
         assert exact[c] >= need - 1.2e-3, (links.describe(c), exact[c], need)
+
+
+def test_theta2_tilt_stays_within_max_tilt_of_u_n(dog):
+    """A weak orientation weight and a COM target low and to the side roll the body 11
+    degrees; ``max_tilt_rad`` bounds the angle between its z axis and u_n."""
+    terrain, placed, _, _ = _placed(dog, "flat", 0.3)
+    start = placed.state
+    rc = start.feet_W[[1, 2, 3]].mean(axis=0) + [0.0, -0.06, 0.09]
+    tilts = {}
+    for deg in (3.0, 80.0):
+        opts = ThetaOptions(weights=(50, 1, 1, 2, 0.5), max_tilt_rad=np.radians(deg))
+        sol = Theta2(dog, terrain, support=(1, 2, 3), options=opts).solve(
+            start, rc, [1, 0, 0], [0, 0, 1]
+        )
+        assert sol.feasible, sol.diagnosis
+        tilts[deg] = np.degrees(np.arccos(sol.state.base_rotation_W[2, 2]))
+    assert tilts[80.0] > 8.0  # free, it rolls
+    assert tilts[3.0] <= 3.0 + 1e-4  # bounded

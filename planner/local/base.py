@@ -48,6 +48,7 @@ from planner.trajectory import Trajectory
 
 BODY_CLEARANCE_M = 0.005  # least height of the body's bottom above the sharp terrain [m]
 JOINT_SPEED_FRACTION = 0.9  # of the URDF velocity limit, the most a path asks of a joint
+OVER_EDGE_SPEED_FRACTION = 0.4  # ... in a swing searched in joint space around an edge
 KNEE_CHOICE_CLEARANCE_M = 0.015  # a landing whose links are nearer an edge than this ...
 KNEE_CHOICE_GAIN_M = 0.01  # ... takes the other knee branch if it is this much clearer
 KNEE_CHOICE_EDGE_M = 0.06  # ... next to an edge this much higher than the foothold
@@ -543,6 +544,8 @@ class LocalPlanner:
         path = joint_space_swing(
             self.robot, self.terrain, lifted, touch, 2 * self.settings.swing_samples, leg
         )
+        for sample in path or ():  # it passes an edge closely: slower (see _joint_time)
+            sample.info["over_edge"] = True
         why = "no path in the leg's joint space" if path is None else self.path_problem(path)
         self._count("swing_joint_space", not why)
         return path, why
@@ -914,17 +917,22 @@ class LocalPlanner:
         """
         body_s = self._body_time(step.start, step.moved) if step.moved is not None else 0.0
         body_s = max(body_s, self._joint_time(step.body_path))
-        swing_s = max(self.settings.swing_time_s, self._joint_time(step.swing_path))
+        over_edge = any(sample.info.get("over_edge") for sample in step.swing_path)
+        fraction = OVER_EDGE_SPEED_FRACTION if over_edge else JOINT_SPEED_FRACTION
+        swing_s = max(self.settings.swing_time_s, self._joint_time(step.swing_path, fraction))
         return body_s, swing_s
 
-    def _joint_time(self, path: list[State]) -> float:
+    def _joint_time(self, path: list[State], fraction: float = JOINT_SPEED_FRACTION) -> float:
         """Least duration [s] of a path sampled evenly in time within the joints' speed.
 
-        Every joint moves at most ``JOINT_SPEED_FRACTION`` of its URDF velocity limit
-        between two samples. Measured: flat walks at the default timing ask up to 0.92 of
-        LittleDog's limits (HR knee, in swings) and MuJoCo tracks them; a joint-space swing
-        that flips a knee (3 rad) in the plain 0.6 s asked 1.3x and the servos lagged 92
-        degrees. Joints without a limit in the URDF are not bound.
+        Every joint moves at most ``fraction`` of its URDF velocity limit between two
+        samples. Measured: flat walks at the default timing ask up to 0.92 of LittleDog's
+        limits (HR knee, in swings) and MuJoCo tracks them; a joint-space swing that flips a
+        knee (3 rad) in the plain 0.6 s asked 1.3x and the servos lagged 92 degrees. A
+        joint-space swing passes an edge by millimetres, less than the servos' lag at 0.9
+        of the limit (barrier75mm open loop: a hind foot swung over the barrier in 1 s, the
+        joints lagged up to 14 degrees and the foot caught the barrier): those go at
+        ``OVER_EDGE_SPEED_FRACTION``. Joints without a limit in the URDF are not bound.
         """
         if len(path) < 2:
             return 0.0
@@ -934,7 +942,7 @@ class LocalPlanner:
             return 0.0
         th = np.array([s.joints_rad.ravel() for s in path])
         step = np.abs(np.diff(th, axis=0)).max(axis=0)
-        per = step[ok] / (JOINT_SPEED_FRACTION * vmax[ok])
+        per = step[ok] / (fraction * vmax[ok])
         return float(per.max() * (len(path) - 1))
 
     @staticmethod

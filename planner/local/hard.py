@@ -26,7 +26,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from planner.heuristics import reference_directions, support_incentre_W
+from planner.heuristics import (
+    reference_directions,
+    support_body_target_W,
+    support_incentre_W,
+)
 from planner.interpolate import interpolate_leaf
 from planner.local.base import TORQUE_FRACTION, LocalPlanner, Step, Walk, _Run
 from planner.problems import Theta1
@@ -87,10 +91,21 @@ class HardPlanner(LocalPlanner):
         lam_now = float(tau.closest_lambda(self.check.com_W(state)))
         lams = [float(tau.clip(lam_now + f * stride_m)) for f in PROBES]
         offset = self.lateral_offset(state, leg, tau, lam_now)
-        last = None
-        for k, lam in enumerate(lams):
+
+        def targets(lam: float):
+            """r_c* on tau (beside it by ``offset``), at the height the footholds ask for."""
             rc = np.asarray(tau.point(lam), float).reshape(3) + offset
             u_f, u_n = reference_directions(tau, self.terrain, rc, lam=lam)
+            feet = self._plane_feet(state, leg, target_W)
+            if feet is not None:
+                rc[2], u_n = support_body_target_W(
+                    self.robot, self.terrain, feet, rc, self.com_height_m(), u_f, u_n
+                )
+            return rc, u_f, u_n
+
+        last = None
+        for k, lam in enumerate(lams):
+            rc, u_f, u_n = targets(lam)
             sol = problem.solve(state, rc, u_f, u_n, target_W)
             self._count("theta1", sol.feasible)
             if sol.feasible and not self.holds_on_three(sol.state, leg):
@@ -111,6 +126,7 @@ class HardPlanner(LocalPlanner):
                 com_offset_W=offset,
                 max_solves=4,
                 swing_target_W=target_W,
+                targets=targets,
             )
             self.stats["theta1"][0] += res.solves
             self.stats["theta1"][1] += len(res.xi)
@@ -122,8 +138,23 @@ class HardPlanner(LocalPlanner):
         return last, None
 
     def hard_step(self, state: State, leg: int, tau: Trajectory, stride_m: float) -> Step:
-        """One step of section 8.1: Omega_1 body move, then Theta3 placement."""
+        """One step of section 8.1: Omega_1 body move, then Theta3 placement.
+
+        When Lambda_t's foothold fails, up to ``OTHER_FOOTHOLDS`` others of the leg's
+        reachable, safe region are tried, as in the soft planner (issue 15 item 3).
+        """
         target, _ = self.foothold_target(state, leg, tau, stride_m)
+        first = self._hard_step_to(state, leg, tau, stride_m, target)
+        if first.ok:
+            return first
+        for other in self.other_footholds(state, leg, tau, target):
+            step = self._hard_step_to(state, leg, tau, stride_m, other)
+            if step.ok:
+                return step
+        return first
+
+    def _hard_step_to(self, state: State, leg: int, tau: Trajectory, stride_m: float, target):
+        """Omega_1 body move ready for the foothold ``target``, then Theta3 placement."""
         sol, lam = self.search_body(state, leg, tau, stride_m, target)
         if lam is None:
             why = sol.diagnosis if sol is not None else "no probe"
