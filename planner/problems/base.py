@@ -63,9 +63,11 @@ class ThetaOptions:
     balance_margin_m : on three legs, the COM at least this far (horizontally) inside every
         edge of the support triangle (:mod:`planner.stability`: chosen from MuJoCo falls).
     sigma_floor : lower bound of sigma1, sigma2, sigma5 (orientation stays forward and up).
-    max_tilt_rad : Theta2's body z axis at most this far from u_n (sigma2 >= its cosine).
-        The objective alone let the body roll 17-29 degrees where the constraints pressed
-        (edges, a leg stretched): the open-loop barrier75mm walk fell after such a roll.
+    max_tilt_rad : Theta2's body z axis at most this far from u_n (sigma2 >= its cosine);
+        None: only ``sigma_floor``. The objective alone lets the body roll 17-29 degrees
+        where the constraints press (edges, a stretched leg), but a 20 degree bound made
+        Theta2 pick other poses and the stepdown8cm plan ended 15.2 cm from its planned
+        end in MuJoCo open loop (2.6 cm without): off by default.
     whole_body_com : whole-body centre of mass (default) or the body link's (the paper).
     max_iter, tol : IPOPT's iteration cap and tolerance. If a problem fails with
         "Maximum_Iterations_Exceeded", raise max_iter or start nearer (warm start).
@@ -83,7 +85,7 @@ class ThetaOptions:
     min_normal_force_frac: float = 0.02
     balance_margin_m: float = BALANCE_MARGIN_M
     sigma_floor: float = 0.05
-    max_tilt_rad: float = float(np.radians(20.0))
+    max_tilt_rad: float | None = None
     whole_body_com: bool = True
     friction_eps_N: float = 1e-3
     max_iter: int = 150

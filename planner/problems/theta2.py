@@ -81,7 +81,8 @@ class Theta2(ThetaProblem):
         phi = self.var("phi", 3, -np.pi, np.pi)
         th = self.var("theta", 12, lo, hi)
         s1 = self.var("s1", 1, o.sigma_floor)
-        s2 = self.var("s2", 1, max(o.sigma_floor, float(np.cos(o.max_tilt_rad))))
+        tilt_floor = o.sigma_floor if o.max_tilt_rad is None else float(np.cos(o.max_tilt_rad))
+        s2 = self.var("s2", 1, max(o.sigma_floor, tilt_floor))
         rc = self.par("rc_star", 3)
         feet = self.par("feet_W", 12)  # contact points r_i*
         centres = self.par("centres_W", 12)  # sphere centres r_i* + rho n_i
