@@ -11,6 +11,7 @@ import pytest
 import yaml
 from PIL import Image
 
+from planner.bench_courses import HARD_COURSES
 from planner.errors import InputError, TerrainError
 from planner.terrain import (
     NP,
@@ -37,14 +38,7 @@ NAMED = [
     "rocks",
     "logs",
     "course_rough",
-    "trench12cm",
-    "incline18",
-    "barrier9cm",
-    "step10cm",
-    "stepdown8cm",
-    "stairs_down",
-    "sparse_stones",
-    "mix4m",
+    *HARD_COURSES,
 ]
 W = 0.005  # default smoothing width
 
