@@ -85,12 +85,15 @@ def physics_jobs(
     out_dir: str | Path = "bench/results",
     named_goal_xy: Sequence[float] = GOAL_XY,
     plans_dir: str | Path | None = None,
+    first_seed: int = 0,
+    planned_only: bool = False,
 ) -> list[dict]:
-    """The jobs: ``courses`` (names, paths or ``gen:...`` names), then generated seeds 0..N-1.
+    """The jobs: ``courses`` (names, paths or ``gen:...`` names), then ``generated`` seeds.
 
-    Generated courses are written to ``out_dir/courses/`` and their YAML path is the job's
-    terrain; their goal is :func:`planner.course_gen.course_goal_xy`, a named course's
-    ``named_goal_xy``.
+    Generated courses (seeds ``first_seed``, ``first_seed + 1``, ...) are written to
+    ``out_dir/courses/`` and their YAML path is the job's terrain; their goal is
+    :func:`planner.course_gen.course_goal_xy`, a named course's ``named_goal_xy``.
+    ``planned_only``: simulate a plan only when it reached the goal and passes the check.
     """
     from planner.course_gen import (
         course_goal_xy,
@@ -100,7 +103,8 @@ def physics_jobs(
         write_course,
     )
 
-    names = list(dict.fromkeys([*courses, *generated_course_names(generated, 0, difficulty)]))
+    gen = generated_course_names(generated, first_seed, difficulty)
+    names = list(dict.fromkeys([*courses, *gen]))
     jobs = []
     for name in names:
         parsed = parse_course_name(name)
@@ -123,6 +127,7 @@ def physics_jobs(
                 "time_budget_s": float(time_budget_s),
                 "time_scale": float(time_scale),
                 "plans_dir": None if plans_dir is None else str(plans_dir),
+                "planned_only": bool(planned_only),
             }
         )
     return jobs
@@ -209,6 +214,8 @@ def run_physics_job(job: dict) -> dict:
         w0 = time.perf_counter()
         if plan is None:
             row |= {"status": "error", "error": f"planning failed: {planning['error']}"}
+        elif job.get("planned_only") and not planning["planned"]:
+            row |= {"status": "skipped", "message": "not simulated: the plan did not reach"}
         else:
             try:
                 from planner.execution import simulate_plan
@@ -322,7 +329,8 @@ def _table(rows: Sequence[dict]) -> list[str]:
             f"| {_f(r.get('planning_time_s'), '.1f')} "
         )
         if r.get("status") != "ok":
-            note = (r.get("error") or r.get("status") or "")[:80].replace("|", "/")
+            note = (r.get("error") or r.get("message") or r.get("status") or "")[:80]
+            note = note.replace("|", "/")
             lines.append(head + "| - " * 10 + f"| {note} |")
             continue
         note = "" if r.get("success") else r.get("message", "")[:60].replace("|", "/")
@@ -441,6 +449,8 @@ def run_physics_bench(
     save_plans: bool = False,
     named_goal_xy: Sequence[float] = GOAL_XY,
     progress: bool = True,
+    first_seed: int = 0,
+    planned_only: bool = False,
 ) -> dict[str, Any]:
     """Run the benchmark's jobs and write ``physics.{jsonl,json,md}`` to ``out_dir``.
 
@@ -466,6 +476,8 @@ def run_physics_bench(
         out,
         named_goal_xy,
         plans_dir=plans_dir,
+        first_seed=first_seed,
+        planned_only=planned_only,
     )
     done = {k: v for k, v in read_results(path).items() if v.get("status") == "ok"}
     todo = [j for j in jobs if job_id(j) not in done]
@@ -493,6 +505,8 @@ def run_physics_bench(
         "planner": "soft",
         "courses": [j["course"] for j in jobs],
         "generated": generated,
+        "first_seed": first_seed,
+        "planned_only": planned_only,
         "difficulty": difficulty,
         "modes": list(modes),
         "start": list(START_XY),
@@ -517,7 +531,13 @@ def add_physics_parser(bench_sub) -> argparse.ArgumentParser:
         default="named",
         help="comma-separated terrains; 'named' = the 9 first courses, 'hard' = issue 15's 8",
     )
-    p.add_argument("--generated", type=int, default=GENERATED, help="generated courses, seeds 0..")
+    p.add_argument("--generated", type=int, default=GENERATED, help="generated courses")
+    p.add_argument("--first-seed", type=int, default=0, help="seed of the first generated course")
+    p.add_argument(
+        "--planned-only",
+        action="store_true",
+        help="simulate only plans that reached the goal and pass the check",
+    )
     p.add_argument("--difficulty", type=float, default=1.0, help="of the generated courses, 0..1")
     p.add_argument("--modes", default=",".join(MODES), help="open,feedback,correct")
     p.add_argument("--time-budget", type=float, default=TIME_BUDGET_S, help="[s] per plan")
@@ -550,6 +570,8 @@ def cmd_physics(args) -> int:
         raise InputError(f"--modes: give at least one of {','.join(MODES)}, comma-separated")
     if args.generated < 0:
         raise InputError(f"--generated: must be >= 0, got {args.generated}")
+    if args.first_seed < 0:
+        raise InputError(f"--first-seed: must be >= 0, got {args.first_seed}")
     if not courses and args.generated == 0:
         raise InputError("--courses: give at least one course, or --generated N")
     for name in courses:
@@ -573,6 +595,8 @@ def cmd_physics(args) -> int:
         workers=args.workers,
         resume=args.resume,
         save_plans=args.save_plans,
+        first_seed=args.first_seed,
+        planned_only=args.planned_only,
     )
     print(render_markdown(result))
     print(f"wrote {Path(args.out) / 'physics.md'} and physics.json, physics.jsonl", file=sys.stderr)

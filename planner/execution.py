@@ -188,6 +188,34 @@ def _source(sim: Simulator, source: StateSource | None, **noise) -> StateSource:
 # ------------------------------------------------------------------------------ 8.3
 # (stride fraction, Lambda_c shrink) tried in turn for one step from a measured state
 BACKOFF = ((1.0, None), (0.5, 0.5), (0.25, 0.7))
+GUIDE_FAILS = 2  # failed cycles in a row after which feedback stops following the plan's steps
+
+
+def planned_steps(plan: Plan) -> list[tuple[int, _Array]]:
+    """The plan's steps in order: (0-based leg, the terrain point it lands on, world [m]).
+
+    A swing keyframe (stratum i = leg + 1) is followed by the keyframe that has the leg
+    down again; its contact point there is the foothold.
+    """
+    kfs = plan.keyframes
+    out = []
+    for k, kf in enumerate(kfs[:-1]):
+        leg = int(kf.stratum) - 1
+        if leg < 0:
+            continue
+        nxt = next((f for f in kfs[k + 1 :] if leg + 1 in f.support), None)
+        if nxt is not None:
+            out.append((leg, np.asarray(nxt.feet[leg], float).copy()))
+    return out
+
+
+def _queue_after(gait, leg: int):
+    """A gait queue whose front is the leg after ``leg`` in ``gait``'s order."""
+    from planner.local.gait_queue import GaitQueue
+
+    order = [int(i) for i in gait]
+    k = order.index(int(leg)) if int(leg) in order else -1
+    return GaitQueue(order[k + 1 :] + order[: k + 1])
 
 
 def run_feedback(
@@ -203,7 +231,14 @@ def run_feedback(
 
     The robot starts, settled, at the plan's first configuration; the soft planner
     (section 8.2, ``local_settings``) plans one cycle at a time
-    (:meth:`planner.local.base.LocalPlanner.step`) from ``source`` (default:
+    (:meth:`planner.local.base.LocalPlanner.step`) from the measured state. It follows
+    the plan's steps first (:func:`planned_steps`: the plan's leg order, its footholds
+    tried first, body moves and swings planned anew from the measured state), since the
+    plan has looked ahead where a greedy step from a state a few centimetres off may
+    walk into a dead end (barrier75mm: the body over the barrier, a hind leg behind it
+    that no body move could free). After ``GUIDE_FAILS`` failed cycles in a row, or past
+    the plan's last step, the gait queue and Lambda_t take over. Measurements come from
+    ``source`` (default:
     :class:`SimulatedMocap` of the simulator with ``noise``: position_noise_m,
     angle_noise_rad, joint_noise_rad, latency_s, seed). Stops at the goal, after
     ``max_cycles`` (default: twice the plan's cycles plus 20), after ``max_fails_in_row``
@@ -229,6 +264,7 @@ def run_feedback(
     n_plan = max(len(cycle_starts(plan.samples.contact)), 1)
     max_cycles = max_cycles if max_cycles is not None else 2 * n_plan + 20
     queue = GaitQueue(st.gait)
+    guide, g, followed = planned_steps(plan), 0, 0
     step_scale = {i: 1.0 for i in range(4)}
     fails, cycles, steps, best, best_at = 0, 0, 0, math.inf, 0
     m = ex.monitor.metrics
@@ -256,10 +292,17 @@ def run_feedback(
                 break
             # one cycle of the soft planner (SoftPlanner._run), from the measured state
             cycles += 1
-            leg = queue.pop()
+            guided = g < len(guide)
+            leg = guide[g][0] if guided else queue.pop()
+            step = None
+            if guided:  # the plan's foothold first, from a body ever nearer the incentre
+                for _, shrink in BACKOFF:
+                    step = local.step(state, leg, tau, local.stride_m(), shrink, guide[g][1], False)
+                    if step.ok:
+                        break
             # back off before giving a leg up: shorter steps over a more centred body (8.5's
             # ambitions); a failed body move leaves the robot standing where it was measured
-            for frac, shrink in BACKOFF:
+            for frac, shrink in BACKOFF if step is None or not step.ok else ():
                 stride = local.stride_m() * step_scale[leg] * frac
                 step = local.step(state, leg, tau, stride, shrink)
                 if step.ok:
@@ -268,12 +311,22 @@ def run_feedback(
                 step_scale[leg] = 1.0
                 fails = 0
                 steps += 1
-                queue.push(leg)
+                if guided:
+                    g += 1
+                    followed += 1
+                    if g == len(guide):
+                        queue = _queue_after(st.gait, leg)
+                else:
+                    queue.push(leg)
             else:
                 if step.phase == "foot_placement":
                     step_scale[leg] = max(step_scale[leg] * 0.5, st.min_step_fraction)
                 fails += 1
-                queue.swap(leg, fails)
+                if guided and fails >= GUIDE_FAILS:  # the plan's steps no longer fit
+                    g = len(guide)
+                    queue = _queue_after(st.gait, leg)  # the leg that failed goes last
+                elif not guided:
+                    queue.swap(leg, fails)
                 m.replans += 1
                 where = step.moved if step.moved is not None else state
                 local._log_failure(cycles, leg, step.phase, where, step.diagnosis)
@@ -300,6 +353,8 @@ def run_feedback(
         "feedback": {
             "steps": steps,
             "cycles": cycles,
+            "plan_steps": len(guide),
+            "plan_steps_followed": followed,
             "planner_solves": local.stats,
             "planner_failures": local.failures[-50:],
         }

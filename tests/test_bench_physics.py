@@ -8,6 +8,7 @@ from planner.bench_physics import (
     physics_rows,
     render_markdown,
     run_physics_bench,
+    run_physics_job,
     summarize,
 )
 from planner.cli import main
@@ -156,6 +157,27 @@ def test_job_list(tmp_path):
         courses=("flat", "gen:5:0.5"), generated=0, modes=("open",), out_dir=tmp_path
     )
     assert [j["course"] for j in custom] == ["flat", "gen:5:0.5"]
+    later = physics_jobs(courses=(), generated=2, first_seed=7, out_dir=tmp_path)
+    assert [j["course"] for j in later] == ["gen:7", "gen:8"]
+    assert not later[0]["planned_only"]
+
+
+def test_planned_only_skips_a_plan_that_did_not_reach(tmp_path):
+    """A plan cut off by its time budget is not simulated (a skipped row, no success)."""
+    (job,) = physics_jobs(
+        courses=("flat",),
+        generated=0,
+        modes=("open",),
+        time_budget_s=0.5,
+        out_dir=tmp_path,
+        planned_only=True,
+    )
+    rec = run_physics_job(job)
+    assert rec["planning"]["planned"] is False
+    (row,) = rec["rows"]
+    assert row["status"] == "skipped" and "reached" not in row
+    (out,) = physics_rows([job], {job_id(job): rec})
+    assert out["success"] is False
 
 
 @pytest.mark.parametrize(

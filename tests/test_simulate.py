@@ -7,6 +7,7 @@ from planner.cli import main
 from planner.execution import (
     Measurement,
     SimulatedMocap,
+    planned_steps,
     run_corrected,
     run_feedback,
     shift_body,
@@ -86,7 +87,12 @@ def test_standing_robot_carries_its_weight_without_creeping(short_plan):
 
 
 def test_feedforward_removes_the_servo_sag(short_plan):
-    """Standing, PD servos sag by tau / kp; the holding-torque feed-forward removes most of it."""
+    """Standing, PD servos sag by tau / kp; a feed-forward of the forces they settle into
+    (uniform stiffness: least sum tau^2) removes most of it. (The executor commands the
+    effort-weighted distribution, which a four-leg stand settles away from: its use is on
+    three legs, planner.torques.)"""
+    from planner.torques import TorqueCheck
+
     plan = short_plan
     q0 = plan.samples.q[0]
     sag = {}
@@ -95,6 +101,8 @@ def test_feedforward_removes_the_servo_sag(short_plan):
             plan.load_robot(), plan.terrain_grid, plan.friction, plan.load_terrain(),
             SimSettings(feedforward=ff),
         )  # fmt: skip
+        sim._holding = TorqueCheck(sim.robot)
+        sim._holding.weights[:] = 1.0  # unweighted: the stiffness distribution
         sim.settle(q0, 1.0)
         sag[ff] = np.abs(sim.joints() - q0[sim._pin_idx]).max()
         tau = sim.holding_torques_nm(q0, np.ones(4, bool))[0]
@@ -224,14 +232,14 @@ def test_feedback_backs_off_instead_of_giving_up(short_plan, monkeypatch):
     real = LocalPlanner.step
     tried = []
 
-    def step(self, state, leg, tau, step_m, shrink=None):
+    def step(self, state, leg, tau, step_m, shrink=None, target_W=None, try_others=True):
         tried.append(step_m)
-        if step_m > 0.6 * self.stride_m():
-            out = real(self, state, leg, tau, step_m, shrink)
+        if step_m > 0.6 * self.stride_m():  # the plan's footholds too (a full stride)
+            out = real(self, state, leg, tau, step_m, shrink, target_W, try_others)
             out.ok, out.moved, out.end, out.phase = False, None, None, "body_move"
             out.diagnosis = "refused by the test"
             return out
-        return real(self, state, leg, tau, step_m, shrink)
+        return real(self, state, leg, tau, step_m, shrink, target_W, try_others)
 
     monkeypatch.setattr(LocalPlanner, "step", step)
     res = run_feedback(short_plan, max_cycles=4)
@@ -240,3 +248,25 @@ def test_feedback_backs_off_instead_of_giving_up(short_plan, monkeypatch):
     assert not (m.fell or m.tipped), m.summary()
     full = max(tried)
     assert any(abs(s - 0.5 * full) < 1e-12 for s in tried)  # the first back-off: half a stride
+
+
+def test_planned_steps_are_the_plans_swings_and_landings(short_plan):
+    steps = planned_steps(short_plan)
+    swings = [kf for kf in short_plan.keyframes if kf.stratum != 0]
+    assert len(steps) == len(swings) == short_plan.stats["steps"]
+    assert [leg for leg, _ in steps[:4]] == [2, 0, 3, 1]  # the crawl: HL, FL, HR, FR
+    for (leg, foot), kf in zip(steps, swings, strict=True):
+        assert kf.stratum == leg + 1 and leg + 1 not in kf.support
+        moved = np.linalg.norm(foot[:2] - kf.feet[leg][:2])  # the swing keyframe: lifted
+        assert 0.02 < moved < 0.12 and abs(foot[2]) < 1e-3  # a stride forward, on the ground
+
+
+def test_feedback_follows_the_plans_footholds(short_plan):
+    """From the measured state, each step is re-planned onto the plan's own foothold."""
+    res = run_feedback(short_plan, max_cycles=4)
+    fb = res.executed.stats["feedback"]
+    assert fb["plan_steps_followed"] == 4 and fb["plan_steps"] == len(planned_steps(short_plan))
+    kfs = res.executed.keyframes  # measured at the start of each cycle
+    for k, (leg, foot) in enumerate(planned_steps(short_plan)[:3]):
+        landed = kfs[k + 1].feet[leg]
+        assert np.linalg.norm(landed[:2] - foot[:2]) < 0.015, (k, landed, foot)

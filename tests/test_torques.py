@@ -90,7 +90,7 @@ def test_no_balance_is_infinite(littledog):
 
 
 def test_least_squares_torques_are_the_equality_constrained_optimum(flat_plan, littledog):
-    """With wide cones, min |tau|^2 subject to balance has a closed form (KKT, numpy)."""
+    """With wide cones, min |tau / effort|^2 subject to balance has a closed form (KKT, numpy)."""
     tc = TorqueCheck(littledog)
     up = np.tile([0.0, 0.0, 1.0], (4, 1))
     model = littledog.model
@@ -103,7 +103,8 @@ def test_least_squares_torques_are_the_equality_constrained_optimum(flat_plan, l
         tau_rnea = _rnea_torques(littledog, q, res.forces_W)
         assert np.abs(tau_rnea[:6]).max() < 1e-6  # the forces balance the robot
         np.testing.assert_allclose(tau_rnea[v], res.torques_nm, atol=1e-6)
-        # reference: tau = g_a - A f, min |tau|^2 s.t. B f = g_b, by the KKT system
+        # reference: tau = g_a - A f, min |W tau|^2 s.t. B f = g_b, by the KKT system, with
+        # W = 1 / (URDF effort) (LittleDog: 1.7 N m hips, 0.6 N m knees)
         data = model.createData()
         g = pin.computeGeneralizedGravity(model, data, q)
         pin.computeJointJacobians(model, data, q)
@@ -117,10 +118,12 @@ def test_least_squares_torques_are_the_equality_constrained_optimum(flat_plan, l
             hat = np.array([[0, -d[2], d[1]], [d[2], 0, -d[0]], [-d[1], d[0], 0]])
             cols.append((J[:3] - hat @ J[3:]).T)
         jt = np.hstack(cols)
+        w = 1.0 / np.array([model.effortLimit[i] for i in v])
         a, b = jt[v], jt[base]
+        wa = w[:, None] * a
         n = a.shape[1]
-        kkt = np.block([[2 * a.T @ a, b.T], [b, np.zeros((len(base), len(base)))]])
-        rhs = np.concatenate([2 * a.T @ g[v], g[base]])
+        kkt = np.block([[2 * wa.T @ wa, b.T], [b, np.zeros((len(base), len(base)))]])
+        rhs = np.concatenate([2 * wa.T @ (w * g[v]), g[base]])
         f = np.linalg.lstsq(kkt, rhs, rcond=None)[0][:n]
         np.testing.assert_allclose(res.torques_nm, g[v] - a @ f, atol=2e-5)
         # it is a balancing distribution, so it needs at least the least achievable ratio

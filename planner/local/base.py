@@ -58,7 +58,11 @@ OTHER_FOOTHOLDS = 8  # footholds tried when the body cannot get ready for Lambda
 CANDIDATE_POOL = 40  # candidates scored before the best and the shortest are picked
 TARGET_RADIUS_M = 0.01  # a placed foot lands within this of its (edge-free) target [m]
 WIDE_TARGET_RADIUS_M = 0.04  # ... or this, when the leg's links forbid the near footholds
-TORQUE_FRACTION = 0.8  # joint torque / URDF effort the servos may need to hold a sample
+# joint torque / URDF effort the servos may need to hold a sample, in the force distribution
+# they settle into (least sum of squared joint torques, as the feed-forward commands): the
+# least achievable ratio relies on internal foot forces no servo produces (barrier75mm: 49 %
+# achievable, 102 % held, and the HL knee saturated and the body yawed 6 degrees in MuJoCo)
+TORQUE_FRACTION = 0.8
 # feedback (8.3) starts paths at a measured state that may already lack a margin by a
 # fraction of a millimetre; a path from it may not lose more than this
 START_SLACK_M = 1e-4
@@ -635,7 +639,8 @@ class LocalPlanner:
         where the leg is held), and the COM
         moves (the body along eq. 6b, the swing leg's own mass) so that it can leave the
         support, or needs joint torques near the servos' limits (``TORQUE_FRACTION`` of
-        the URDF effort, :mod:`planner.torques`: a saturated servo cannot track). Every
+        the URDF effort in the distribution the servos settle into, :mod:`planner.torques`:
+        a saturated servo cannot track). Every
         sample is checked with IK and the exact friction-cone test
         (:func:`planner.statics.static_feasibility`), with a margin of
         ``settings.balance_margin_frac`` x m g; on three legs the COM also stays
@@ -723,7 +728,9 @@ class LocalPlanner:
         ceiling = TORQUE_FRACTION
         for k, (s, q) in enumerate(zip(path, qs, strict=True)):
             sup = np.flatnonzero(s.in_contact)
-            tq = self.torques.solve(q, sup, self.mu, self.terrain.normal(s.feet_W))
+            tq = self.torques.solve(
+                q, sup, self.mu, self.terrain.normal(s.feet_W), least_squares=True
+            )
             if k == 0 and np.isfinite(tq.ratio):  # a measured start: no more than it needs
                 ceiling = max(TORQUE_FRACTION, min(tq.ratio, MAX_START_TORQUE_FRACTION))
             if not tq.ratio <= ceiling:
@@ -752,7 +759,14 @@ class LocalPlanner:
         return st.step_m if st.step_m is not None else 0.35 * float(np.min(self.robot.reach_m))
 
     def step(
-        self, state: State, leg: int, tau: Trajectory, step_m: float, shrink: float | None = None
+        self,
+        state: State,
+        leg: int,
+        tau: Trajectory,
+        step_m: float,
+        shrink: float | None = None,
+        target_W=None,
+        try_others: bool = True,
     ) -> Step:
         """One step of ``leg`` from ``state``: body move (swing-ready), swing, placement.
 
@@ -762,9 +776,14 @@ class LocalPlanner:
         ``OTHER_FOOTHOLDS`` others of the leg's reachable, safe region are tried
         (:meth:`other_footholds`, issue 15). A failed placement keeps the body move
         (``Step.moved``) of the first attempt: the robot stands safely on three legs there.
-        ``shrink`` overrides ``settings.shrink`` of Lambda_c.
+        ``shrink`` overrides ``settings.shrink`` of Lambda_c. ``target_W``: the foothold to
+        try first (a terrain point, world frame; e.g. a precomputed plan's), instead of
+        Lambda_t's; ``try_others`` False: no other foothold is tried.
         """
-        target, _ = self.foothold_target(state, leg, tau, step_m, shrink)
+        if target_W is not None:
+            target = np.asarray(target_W, float).reshape(3)
+        else:
+            target, _ = self.foothold_target(state, leg, tau, step_m, shrink)
         first = None  # the first failure, reported when no foothold works
         others = None
         k = 0
@@ -786,6 +805,8 @@ class LocalPlanner:
             first = first or step
             if "balance_margin" in step.diagnosis and step.phase == "body_move" and k == 0:
                 break  # the COM cannot shift onto the other three legs: no foothold helps
+            if not try_others:
+                break
             if others is None:
                 others = self.other_footholds(state, leg, tau, target, shrink)
             if k >= len(others):

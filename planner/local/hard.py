@@ -69,7 +69,9 @@ class HardPlanner(LocalPlanner):
         """
         sup = [i for i in range(4) if i != leg]
         q = self.robot.q_from(state.base_position_W, state.base_quaternion_xyzw, state.joints_rad)
-        res = self.torques.solve(q, sup, self.mu, self.terrain.normal(state.feet_W))
+        res = self.torques.solve(
+            q, sup, self.mu, self.terrain.normal(state.feet_W), least_squares=True
+        )
         return bool(res.ratio <= TORQUE_FRACTION)
 
     def lateral_offset(self, state: State, leg: int, tau: Trajectory, lam: float) -> np.ndarray:
