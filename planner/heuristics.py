@@ -53,6 +53,11 @@ EDGE_MARGIN_M = 0.015  # a foothold keeps this much beyond the foot radius from 
 WALL_RADIUS_M = 0.04  # a foothold this close to a higher edge (a riser, a pit wall) is refused
 WALL_HEIGHT_M = 0.01  # ... when the top of that edge is this much higher [m]
 HAZARD_GRID_M = 0.003  # sampling step of the sharp terrain around a foothold [m]
+# a foothold with terrain PIT_DEPTH_M higher both within PIT_HALF_WIDTH_M ahead of it and
+# within that behind it lies in a trench or a pit: a hind foot put in a generated 7.5 cm
+# trench (8 cm deep) could not climb out once the body had moved on
+PIT_HALF_WIDTH_M = 0.07
+PIT_DEPTH_M = 0.03
 MAX_SUPPORT_TILT_RAD = np.radians(30.0)  # the body follows the footholds' plane up to this tilt
 BODY_TARGET_CLEARANCE_M = 0.02  # body target: box bottom this high over the terrain (as Theta2)
 BODY_FOOTPRINT_GRID_M = 0.01  # sampling of the terrain under the body box (a thin barrier)
@@ -397,7 +402,10 @@ def foothold_hazard(
     ahead of the point or beside it count: one behind it is the edge the leg has just
     stepped down from, which the foot leaves behind and whose clearance from the leg's
     links the planner checks exactly (the wall rule kept a front foot 4 cm from the riser
-    of an 8 cm step down, out of the leg's reach). Smooth ground, however rough, has no edge.
+    of an 8 cm step down, out of the leg's reach); but a point with terrain ``PIT_DEPTH_M``
+    higher both ahead and behind it, within ``PIT_HALF_WIDTH_M``, is the floor of a trench
+    or a pit, which the foot would have to climb out of. Smooth ground, however rough, has
+    no edge.
     """
     p = np.asarray(point_W, float).reshape(3)
     r_edge = float(radius_m) + float(edge_margin_m)
@@ -425,6 +433,12 @@ def foothold_hazard(
         return (
             f"an edge {float(H[near].max()) - h0:.3f} m higher within {WALL_RADIUS_M * 100:.0f} cm"
         )
+    if forward_W is not None:
+        d = np.arange(1, int(np.ceil(PIT_HALF_WIDTH_M / HAZARD_GRID_M)) + 1) * HAZARD_GRID_M
+        ahead = np.asarray(terrain.height_sharp(p[0] + d * f[0], p[1] + d * f[1]), float)
+        behind = np.asarray(terrain.height_sharp(p[0] - d * f[0], p[1] - d * f[1]), float)
+        if min(float(ahead.max()), float(behind.max())) > h0 + PIT_DEPTH_M:
+            return f"the floor of a trench or pit (walls within {PIT_HALF_WIDTH_M * 100:.0f} cm)"
     return ""
 
 

@@ -75,6 +75,22 @@ def test_a_riser_counts_as_a_wall_ahead_of_the_foot_not_behind_it(littledog):
     )
 
 
+def test_the_floor_of_a_narrow_trench_is_refused_walking_either_way(littledog):
+    """A 9 cm trench, 8 cm deep: its floor is a trap, not a foothold (a hind foot in a
+    generated course's 7.5 cm trench could not climb out once the body had moved on)."""
+    trench = _terrain("gap", x_start=0.75, width=0.09, depth=0.08)
+    rho = littledog.foot_radius_m
+    floor = np.array([0.795, 0.0, -0.08])  # 4.5 cm from either wall: past the wall rule
+    for forward in ([1, 0, 0], [-1, 0, 0]):
+        assert "trench" in foothold_hazard(trench, floor, rho, 0.7, forward_W=forward)
+    # a wide trench's floor (walls 12 cm apart and more) is not a pit
+    wide = _terrain("gap", x_start=0.75, width=0.16, depth=0.08)
+    assert foothold_hazard(wide, np.array([0.83, 0.0, -0.08]), rho, 0.7, forward_W=[1, 0, 0]) == ""
+    # nor the foot of a step down (the riser behind, flat ahead)
+    down = _terrain("step", x=0.8, height=-0.08)
+    assert foothold_hazard(down, np.array([0.84, 0.0, -0.08]), rho, 0.7, forward_W=[1, 0, 0]) == ""
+
+
 def test_candidates_reach_back_to_the_nearest_point_past_an_edge(littledog):
     """A foot at the base of a 10 cm step: the nearest safe point on top is offered."""
     up = _terrain("step", x=0.8, height=0.1)
