@@ -50,8 +50,20 @@ def robot_summary(robot) -> str:
 
 
 def _cmd_robot(args) -> int:
-    from planner.robot import load_robot
+    from planner.robot import load_robot, resolve_urdf, robot_names
 
+    if args.list:
+        if args.robot is not None:
+            raise InputError("--list: lists every robot; give it without a robot name")
+        for name in robot_names():
+            try:
+                where = str(resolve_urdf(name)[1])
+            except Exception as exc:  # e.g. example-robot-data's folder is missing
+                where = f"(unavailable: {exc})"
+            print(f"{name:12s} {where}")
+        return 0
+    if args.robot is None:
+        raise InputError("robot: give a robot name (see stratawalk robot --list) or a URDF path")
     print(robot_summary(load_robot(args.robot)))
     return 0
 
@@ -269,8 +281,11 @@ def build_parser() -> argparse.ArgumentParser:
     """Argument parser of the ``stratawalk`` command."""
     p = _Parser(prog="stratawalk", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True)
-    r = sub.add_parser("robot", help="summary of a robot: legs, joints, limits, masses, reach")
-    r.add_argument("robot", help="littledog, an example-robot-data name, or a URDF path")
+    r = sub.add_parser(
+        "robot", help="summary of a robot: legs, joints, limits, masses, reach; or --list"
+    )
+    r.add_argument("robot", nargs="?", help="littledog, an example-robot-data name, or a URDF path")
+    r.add_argument("--list", action="store_true", help="the robot names and their URDFs")
     r.set_defaults(func=_cmd_robot)
     t = sub.add_parser("terrain", help="list terrains, or describe/draw one")
     t.add_argument("name", nargs="?", help="terrain name (terrains/NAME.yaml) or YAML path")

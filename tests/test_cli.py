@@ -10,6 +10,21 @@ def test_robot_summary_prints_littledog(capsys):
     assert "FL_hip_roll" in out and "3.004 kg" in out and "knee points rearward" in out
 
 
+def test_robot_list_names_every_loadable_robot_and_its_urdf(capsys):
+    from pathlib import Path
+
+    from planner.robot import robot_names
+
+    assert main(["robot", "--list"]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert [ln.split()[0] for ln in lines] == robot_names()
+    assert all(Path(ln.split()[1]).is_file() for ln in lines)  # each URDF exists here
+    for args, option in ((["robot"], "robot:"), (["robot", "go1", "--list"], "--list")):
+        assert main(args) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.count("\n") == 0 and option in err
+
+
 def test_robot_bad_path_is_one_line_error(capsys, tmp_path):
     assert main(["robot", str(tmp_path / "x.urdf")]) == 2
     err = capsys.readouterr().err.strip()
