@@ -294,11 +294,12 @@ def run_feedback(
             cycles += 1
             guided = g < len(guide)
             leg = guide[g][0] if guided else queue.pop()
-            step = None
+            step, on_plan = None, False
             if guided:  # the plan's foothold first, from a body ever nearer the incentre
                 for _, shrink in BACKOFF:
                     step = local.step(state, leg, tau, local.stride_m(), shrink, guide[g][1], False)
                     if step.ok:
+                        on_plan = True
                         break
             # back off before giving a leg up: shorter steps over a more centred body (8.5's
             # ambitions); a failed body move leaves the robot standing where it was measured
@@ -313,7 +314,7 @@ def run_feedback(
                 steps += 1
                 if guided:
                     g += 1
-                    followed += 1
+                    followed += int(on_plan)
                     if g == len(guide):
                         queue = _queue_after(st.gait, leg)
                 else:
@@ -354,7 +355,7 @@ def run_feedback(
             "steps": steps,
             "cycles": cycles,
             "plan_steps": len(guide),
-            "plan_steps_followed": followed,
+            "plan_steps_followed": followed,  # landed on the plan's foothold
             "planner_solves": local.stats,
             "planner_failures": local.failures[-50:],
         }
