@@ -70,8 +70,15 @@ _ID_FIELDS = ("robot", "course", "planner", "start", "goal", "modes", "time_budg
 
 # ------------------------------------------------------------------------------ jobs
 def job_id(job: dict) -> str:
-    """16 hex digits of the SHA-256 of the job's fields (not its terrain path or plans_dir)."""
-    text = json.dumps({k: job[k] for k in _ID_FIELDS}, sort_keys=True, separators=(",", ":"))
+    """16 hex digits of the SHA-256 of the job's fields (not its terrain path or plans_dir).
+
+    ``planned_only`` counts only when set (a run that skipped simulations must not stand in
+    for one that simulates every plan on ``--resume``; older records keep their ids).
+    """
+    fields = {k: job[k] for k in _ID_FIELDS}
+    if job.get("planned_only"):
+        fields["planned_only"] = True
+    text = json.dumps(fields, sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 

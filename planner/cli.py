@@ -9,7 +9,7 @@ import sys
 
 import numpy as np
 
-from planner.errors import InputError, PlannerError
+from planner.errors import InputError, PlannerError, RobotModelError
 
 
 def robot_summary(robot) -> str:
@@ -58,7 +58,7 @@ def _cmd_robot(args) -> int:
         for name in robot_names():
             try:
                 where = str(resolve_urdf(name)[1])
-            except Exception as exc:  # e.g. example-robot-data's folder is missing
+            except RobotModelError as exc:  # example-robot-data's folder is missing
                 where = f"(unavailable: {exc})"
             print(f"{name:12s} {where}")
         return 0

@@ -160,6 +160,10 @@ def test_job_list(tmp_path):
     later = physics_jobs(courses=(), generated=2, first_seed=7, out_dir=tmp_path)
     assert [j["course"] for j in later] == ["gen:7", "gen:8"]
     assert not later[0]["planned_only"]
+    # a run that skips unplanned simulations is another job (--resume must not mix them)
+    skipping = physics_jobs(courses=(), generated=1, first_seed=7, out_dir=tmp_path,
+                            planned_only=True)  # fmt: skip
+    assert job_id(skipping[0]) != job_id(later[0])
 
 
 def test_planned_only_skips_a_plan_that_did_not_reach(tmp_path):

@@ -59,9 +59,9 @@ CANDIDATE_POOL = 40  # candidates scored before the best and the shortest are pi
 TARGET_RADIUS_M = 0.01  # a placed foot lands within this of its (edge-free) target [m]
 WIDE_TARGET_RADIUS_M = 0.04  # ... or this, when the leg's links forbid the near footholds
 # joint torque / URDF effort the servos may need to hold a sample, in the force distribution
-# they settle into (least sum of squared joint torques, as the feed-forward commands): the
-# least achievable ratio relies on internal foot forces no servo produces (barrier75mm: 49 %
-# achievable, 102 % held, and the HL knee saturated and the body yawed 6 degrees in MuJoCo)
+# the feed-forward commands (least sum of (torque / effort)^2, planner.torques): the least
+# achievable ratio relies on internal foot forces no servo produces (barrier75mm: 49 %
+# achievable, 102 % commanded, and the HL knee saturated and the body yawed 6 degrees)
 TORQUE_FRACTION = 0.8
 # feedback (8.3) starts paths at a measured state that may already lack a margin by a
 # fraction of a millimetre; a path from it may not lose more than this
@@ -639,8 +639,8 @@ class LocalPlanner:
         where the leg is held), and the COM
         moves (the body along eq. 6b, the swing leg's own mass) so that it can leave the
         support, or needs joint torques near the servos' limits (``TORQUE_FRACTION`` of
-        the URDF effort in the distribution the servos settle into, :mod:`planner.torques`:
-        a saturated servo cannot track). Every
+        the URDF effort in the distribution the feed-forward commands,
+        :mod:`planner.torques`: a saturated servo cannot track). Every
         sample is checked with IK and the exact friction-cone test
         (:func:`planner.statics.static_feasibility`), with a margin of
         ``settings.balance_margin_frac`` x m g; on three legs the COM also stays

@@ -93,12 +93,12 @@ class HardPlanner(LocalPlanner):
         lam_now = float(tau.closest_lambda(self.check.com_W(state)))
         lams = [float(tau.clip(lam_now + f * stride_m)) for f in PROBES]
         offset = self.lateral_offset(state, leg, tau, lam_now)
+        feet = self._plane_feet(state, leg, target_W)  # the same for every lambda
 
         def targets(lam: float):
             """r_c* on tau (beside it by ``offset``), at the height the footholds ask for."""
             rc = np.asarray(tau.point(lam), float).reshape(3) + offset
             u_f, u_n = reference_directions(tau, self.terrain, rc, lam=lam)
-            feet = self._plane_feet(state, leg, target_W)
             if feet is not None:
                 rc[2], u_n = support_body_target_W(
                     self.robot, self.terrain, feet, rc, self.com_height_m(), u_f, u_n
