@@ -299,7 +299,10 @@ def parse_course_name(name: str) -> tuple[int, float, float] | None:
         raise InputError(
             f"course '{name}': expected gen:SEED[:DIFFICULTY[:LENGTH]] with numbers"
         ) from None
-    _check_args(seed, length_m, difficulty)
+    try:
+        _check_args(seed, length_m, difficulty)
+    except InputError as exc:  # name the course, not the generate-course option
+        raise InputError(f"course '{name}': {exc}".replace("--", "")) from None
     return seed, difficulty, length_m
 
 

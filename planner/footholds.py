@@ -61,6 +61,7 @@ def foothold_candidates(
     max_lateral_m: float = 0.05,
     min_spacing_m: float = 0.02,
     limit: int = 6,
+    accept=None,
 ) -> list[_Array]:
     """Up to ``limit`` safe, reachable contact points near ``target_W``, best first.
 
@@ -70,7 +71,8 @@ def foothold_candidates(
     skipped (the grid reaches back to it: ``max_back_m`` None), and a candidate higher or
     lower than it moves the hip up or down by ``HIP_FOLLOW`` of the difference (the body
     follows its footholds' plane, in which a pair of legs shares a step:
-    :func:`planner.heuristics.support_body_target_W`).
+    :func:`planner.heuristics.support_body_target_W`). ``accept(point)`` False drops a
+    candidate (before ``limit`` is counted).
     """
     t = np.asarray(target_W, float).reshape(3)
     f, side = horizontal_axes(forward_W)
@@ -120,6 +122,8 @@ def foothold_candidates(
         if any(np.linalg.norm(c[:2] - o[:2]) < min_spacing_m for o in out):
             continue
         if foothold_hazard(terrain, c, rho, mu, forward_W=f):
+            continue
+        if accept is not None and not accept(c):
             continue
         out.append(c)
     return out

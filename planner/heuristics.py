@@ -35,6 +35,8 @@ __all__ = [
     "support_incentre_W",
     "support_plane_W",
     "support_body_target_W",
+    "body_clearance_height_m",
+    "reach_height_cap_m",
     "lambda_c",
     "lambda_t",
     "reference_directions",
@@ -58,6 +60,11 @@ HAZARD_GRID_M = 0.003  # sampling step of the sharp terrain around a foothold [m
 # trench (8 cm deep) could not climb out once the body had moved on
 PIT_HALF_WIDTH_M = 0.07
 PIT_DEPTH_M = 0.03
+# a step that failed is tried again with the body target sunk until every hip is within
+# this share of its leg's reach of its foot, not below the body box's clearance (Theta2
+# holds 0.96; a crawl stance reaches 0.94 before a hind leg swings, so always sinking to 0.9
+# lowered every walk and made the hind legs roll the body 18 degrees over barrier75mm)
+TARGET_REACH_FRACTION = 0.9
 MAX_SUPPORT_TILT_RAD = np.radians(30.0)  # the body follows the footholds' plane up to this tilt
 BODY_TARGET_CLEARANCE_M = 0.02  # body target: box bottom this high over the terrain (as Theta2)
 BODY_FOOTPRINT_GRID_M = 0.01  # sampling of the terrain under the body box (a thin barrier)
@@ -255,13 +262,25 @@ def support_body_target_W(
     grad = pitch_slope * ex + roll_slope * ey
     n = np.array([-grad[0], -grad[1], 1.0])
     n /= np.linalg.norm(n)
+    return max(z, body_clearance_height_m(robot, terrain, xy, ex)), n
+
+
+def body_clearance_height_m(robot: Robot, terrain, xy: ArrayLike, heading_W: ArrayLike) -> float:
+    """Least body target height [m] over ``xy`` for the body box to clear the terrain.
+
+    The box's bottom (its footprint around ``xy``, facing ``heading_W``) stays
+    ``BODY_TARGET_CLEARANCE_M`` over the highest sharp terrain under it (a barrier, an edge).
+    """
+    ex = np.asarray(heading_W, float)[:2]
+    ex = ex / max(float(np.linalg.norm(ex)), 1e-9)
+    ey = np.array([-ex[1], ex[0]])
     lo, hi = np.asarray(robot.body_box_B, float)
     nu, nv = (int(np.ceil((hi[k] - lo[k]) / BODY_FOOTPRINT_GRID_M)) + 1 for k in (0, 1))
     u, v = np.meshgrid(np.linspace(lo[0], hi[0], nu), np.linspace(lo[1], hi[1], nv))
-    X = x + u * ex[0] + v * ey[0]
-    Y = y + u * ex[1] + v * ey[1]
+    X = float(xy[0]) + u * ex[0] + v * ey[0]
+    Y = float(xy[1]) + u * ex[1] + v * ey[1]
     top = float(np.max(terrain.height_sharp(X.ravel(), Y.ravel())))
-    return max(z, top - float(lo[2]) + BODY_TARGET_CLEARANCE_M), n
+    return top - float(lo[2]) + BODY_TARGET_CLEARANCE_M
 
 
 # ---- reference directions and the body pose on tau (sections 7.2-7.3) -----------------------
@@ -283,6 +302,33 @@ def reference_directions(
     u_f = np.asarray(tau.tangent(lam_), dtype=float).reshape(3)
     u_n = np.asarray(terrain.smoothed_normal(p, radius_m), dtype=float).reshape(3)
     return u_f, u_n / np.linalg.norm(u_n)
+
+
+def reach_height_cap_m(
+    robot: Robot,
+    hips_W: ArrayLike,
+    centres_W: ArrayLike,
+    legs: ArrayLike,
+    fraction: float = TARGET_REACH_FRACTION,
+) -> float:
+    """How far [m] (<= 0) a body pose must sink for every hip to reach its foot's centre.
+
+    ``hips_W`` (4, 3): the hip centres at the pose; ``centres_W`` (4, 3): each leg's foot
+    sphere centre (a stance foot, or the swing leg's next foothold); ``legs``: the legs to
+    keep within ``fraction`` of their reach. A hip too far sideways of its
+    foot to reach it at any height is left out (sinking does not help it). Beyond the
+    paper (issue 15 item 2: the body lowers where a leg would be stretched).
+    """
+    hips = np.asarray(hips_W, float).reshape(4, 3)
+    centres = np.asarray(centres_W, float).reshape(4, 3)
+    dz = 0.0
+    for i in legs:
+        r = fraction * float(robot.reach_m[i])
+        d = hips[i] - centres[i]
+        flat2 = float(d[0] ** 2 + d[1] ** 2)
+        if flat2 < r * r and d[2] > 0.0:
+            dz = min(dz, float(np.sqrt(r * r - flat2)) - float(d[2]))
+    return dz
 
 
 def frame_from_directions(u_f: _Array, u_n: _Array) -> _Array:

@@ -26,6 +26,7 @@ __all__ = [
     "PATH_BALANCE_MARGIN_M",
     "support_margin_m",
     "support_margins_ca",
+    "triangle_inradius_m",
 ]
 
 BALANCE_MARGIN_M = 0.025  # three-leg keyframes: COM this far inside the support triangle
@@ -49,6 +50,18 @@ def support_margin_m(feet_W: ArrayLike, com_W: ArrayLike) -> float:
         e = tri[b] - tri[a]
         out = min(out, sign * _cross(e, p - tri[a]) / float(np.linalg.norm(e)))
     return float(out)
+
+
+def triangle_inradius_m(feet_W: ArrayLike) -> float:
+    """Inradius [m] of the horizontal triangle of three feet: the largest margin of any COM.
+
+    No point of the triangle is farther than this from its nearest edge, so a three-leg
+    stance on these feet can keep a COM at most this far inside (0 when collinear).
+    """
+    tri = np.asarray(feet_W, dtype=float).reshape(3, 3)[:, :2]
+    area = 0.5 * abs(_cross(tri[1] - tri[0], tri[2] - tri[0]))
+    semi = 0.5 * sum(float(np.linalg.norm(tri[b] - tri[a])) for a, b in ((0, 1), (1, 2), (2, 0)))
+    return area / semi if semi > 0.0 else 0.0
 
 
 def support_margins_ca(feet_W: list, com_W) -> ca.MX:

@@ -1306,15 +1306,25 @@ def _display(path: Path) -> str:
 
 
 def load_terrain(name_or_path: str | Path) -> Terrain:
-    """Load a terrain by name (``terrains/NAME.yaml``) or from a YAML path.
+    """Load a terrain by name (``terrains/NAME.yaml``), generated name or YAML path.
+
+    A generated course's name ``gen:SEED[:DIFFICULTY[:LENGTH]]``
+    (:mod:`planner.course_gen`) is drawn anew: the same name gives the same terrain.
 
     Raises
     ------
     TerrainError
         Unknown name, unreadable file, bad YAML, or any malformed field.
+    InputError
+        A ``gen:`` name whose numbers are malformed or out of range.
 
     """
     text = str(name_or_path)
+    if not isinstance(name_or_path, Path) and text.startswith("gen:"):
+        from planner.course_gen import generate_course, parse_course_name
+
+        seed, difficulty, length_m = parse_course_name(text)
+        return Terrain.from_spec(generate_course(seed, length_m, difficulty), source=text)
     is_path = (
         isinstance(name_or_path, Path)
         or text.endswith((".yaml", ".yml"))

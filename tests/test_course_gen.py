@@ -188,3 +188,20 @@ def test_cli_writes_a_yaml_the_terrain_command_accepts(tmp_path, capsys):
     assert main(["generate-course", "--seed", "5", "--difficulty", "2", "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "--difficulty" in err
+
+
+def test_a_generated_name_is_a_terrain_name(capsys):
+    """``--terrain gen:SEED[:D[:L]]`` draws the course anew (plans store the name)."""
+    terrain = load_terrain("gen:4:0.5")
+    assert terrain.name == "gen:4:0.5"
+    assert terrain.spec == Terrain.from_spec(generate_course(4, difficulty=0.5)).spec
+    xy = np.array([[0.3, 0.0], [1.2, 0.1], [2.5, -0.2]])
+    want = Terrain.from_spec(generate_course(4, difficulty=0.5)).height(xy[:, 0], xy[:, 1])
+    np.testing.assert_array_equal(terrain.height(xy[:, 0], xy[:, 1]), want)
+    with pytest.raises(InputError, match="gen:SEED"):
+        load_terrain("gen:4:hard")
+    assert main(["terrain", "gen:4:0.5"]) == 0
+    assert "terrain gen:4:0.5" in capsys.readouterr().out
+    assert main(["terrain", "gen:-1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "course 'gen:-1': seed" in err

@@ -14,6 +14,7 @@ from planner.heuristics import (
     lambda_t,
     nominal_height_m,
     normal_smoothing_radius_m,
+    reach_height_cap_m,
     reference_directions,
     support_body_target_W,
     support_centroid_W,
@@ -281,3 +282,26 @@ def test_lambda_c_with_footholds_follows_them(littledog):
     follow = lambda_c(littledog, terrain, st, 3, feet_plane_W=feet)
     np.testing.assert_allclose(follow[:2], paper[:2], atol=1e-15)  # same xy (eq. 12)
     assert follow[2] < paper[2]  # between the levels, not over the step top
+
+
+def test_reach_cap_sinks_the_body_until_every_hip_reaches(littledog):
+    rng = np.random.default_rng(2)
+    reach = np.asarray(littledog.reach_m, float)
+    for _ in range(50):
+        centres = rng.uniform(-0.15, 0.15, (4, 3)) * [1.0, 1.0, 0.2]
+        hips = centres + rng.uniform(-0.08, 0.08, (4, 3)) + [0.0, 0.0, 0.16]
+        dz = reach_height_cap_m(littledog, hips, centres, range(4), fraction=0.9)
+        assert dz <= 0.0
+        lowered = hips + [0.0, 0.0, dz]
+        dist = np.linalg.norm(lowered - centres, axis=1)
+        assert np.all(dist <= 0.9 * reach + 1e-9)  # every hip within reach, ...
+        if dz < 0.0:  # ... and one of them exactly at it: no lower than needed
+            assert np.isclose(dist, 0.9 * reach, atol=1e-9).any()
+    # a hip beside its foot farther than the reach is left to Theta2 (sinking cannot help)
+    centres = np.zeros((4, 3))
+    hips = np.array([[0.0, 0.0, 0.1]] * 3 + [[0.5, 0.0, 0.1]])
+    assert reach_height_cap_m(littledog, hips, centres, range(4)) == 0.0
+    # only the listed legs count
+    hips[0, 2] = 0.5
+    assert reach_height_cap_m(littledog, hips, centres, [1, 2]) == 0.0
+    assert reach_height_cap_m(littledog, hips, centres, [0]) < -0.3

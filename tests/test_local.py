@@ -107,7 +107,8 @@ def test_failed_step_is_retried_from_the_queue(flat_planner, monkeypatch):
     runs = [leg for k, leg in enumerate(attempts) if k == 0 or attempts[k - 1] != leg]
     assert runs[:4] == [2, 0, 3, 0], attempts
     first_fl = attempts[1 : attempts.index(3)]
-    assert set(first_fl) == {0} and len(first_fl) <= 1 + OTHER_FOOTHOLDS, attempts
+    # (its footholds, then once more with the body lower: the step's back-off)
+    assert set(first_fl) == {0} and len(first_fl) <= 2 * (1 + OTHER_FOOTHOLDS), attempts
 
 
 # ---- planners over real terrain, checked by the independent validator ----------------------
@@ -247,3 +248,59 @@ def test_steps_in_place_stop_the_planner(flat_planner):
         run.cycles += 1
     assert all(r == "" for r in reasons[:-1])
     assert reasons[-1].startswith("stuck: no progress")
+
+
+def test_a_foothold_that_leaves_the_next_leg_no_stance_is_tried_last(flat_planner, monkeypatch):
+    planner = SoftPlanner(flat_planner.robot, flat_planner.terrain)
+    tau = Trajectory.straight([0.2, 0.0], [1.0, 0.0], planner.terrain, planner.com_height_m())
+    start = planner.initial_state([0.2, 0.0], tau)
+    # a stand-in rule: FL's footholds left of y = 8 cm leave no stance (Lambda_t's does)
+    monkeypatch.setattr(planner, "leaves_no_support", lambda state, leg, c: c[1] < 0.08)
+    tried = []
+    real = planner.body_move
+
+    def body_move(state, leg, tau, swing_target_W=None, shrink=None):
+        tried.append(None if swing_target_W is None else np.array(swing_target_W))
+        return real(state, leg, tau, swing_target_W, shrink)
+
+    monkeypatch.setattr(planner, "body_move", body_move)
+    step = planner.step(start, 0, tau, planner.stride_m())
+    assert step.ok, step.diagnosis
+    assert tried[0][1] >= 0.08 and step.end.feet_W[0][1] >= 0.08 - 1e-3
+    assert step.end.feet_W[0][0] > start.feet_W[0][0] + 0.01
+    # without the rule the same step takes Lambda_t's foothold, about the stance width
+    monkeypatch.setattr(planner, "leaves_no_support", lambda state, leg, c: False)
+    plain = planner.step(start, 0, tau, planner.stride_m())
+    assert plain.ok and plain.end.feet_W[0][1] < 0.075
+
+
+def test_a_failed_step_is_tried_again_with_the_body_lower(flat_planner, monkeypatch):
+    """The back-off of LocalPlanner.step: body targets sunk where a leg is stretched."""
+    planner = SoftPlanner(flat_planner.robot, flat_planner.terrain)
+    tau = Trajectory.straight([0.2, 0.0], [1.0, 0.0], planner.terrain, planner.com_height_m())
+    start = planner.initial_state([0.2, 0.0], tau)
+    stretched = start.copy()
+    stretched.feet_W[2, 0] -= 0.1  # HL far behind: its hip would be out of reach
+    high = planner.body_target(stretched, 1, tau=tau)
+    planner._sink = True
+    low = planner.body_target(stretched, 1, tau=tau)
+    assert low[2] < high[2] - 0.005 and np.allclose(low[:2], high[:2])
+    assert planner._reach_sink_m(stretched, 1, low, tau, None) > -1e-9  # now within reach
+    assert planner.body_target(start, 1, tau=tau)[2] == pytest.approx(  # nothing stretched
+        SoftPlanner(planner.robot, planner.terrain).body_target(start, 1, tau=tau)[2]
+    )
+    planner._sink = False
+    # a step that fails is attempted once more, sunk, and the sunk attempt kept if it works
+    seen = []
+    real = planner._step_once
+
+    def once(*args):
+        seen.append(planner._sink)
+        out = real(*args)
+        if not planner._sink:
+            out.ok, out.diagnosis = False, "forced failure"
+        return out
+
+    monkeypatch.setattr(planner, "_step_once", once)
+    step = planner.step(start, 2, tau, planner.stride_m())
+    assert seen == [False, True] and step.ok and not planner._sink

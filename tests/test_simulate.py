@@ -12,6 +12,7 @@ from planner.execution import (
     run_feedback,
     shift_body,
 )
+from planner.footholds import MIN_ADVANCE_M
 from planner.plan import Plan, Samples
 from planner.simulate import (
     SimSettings,
@@ -258,7 +259,8 @@ def test_planned_steps_are_the_plans_swings_and_landings(short_plan):
     for (leg, foot), kf in zip(steps, swings, strict=True):
         assert kf.stratum == leg + 1 and leg + 1 not in kf.support
         moved = np.linalg.norm(foot[:2] - kf.feet[leg][:2])  # the swing keyframe: lifted
-        assert 0.02 < moved < 0.12 and abs(foot[2]) < 1e-3  # a stride forward, on the ground
+        # forward (a stride, or a shorter step: at least min_step_fraction of it), grounded
+        assert MIN_ADVANCE_M < moved < 0.12 and abs(foot[2]) < 1e-3
 
 
 def test_feedback_follows_the_plans_footholds(short_plan):

@@ -9,7 +9,12 @@ from planner import statics
 from planner.problems import Theta2, Theta4
 from planner.problems.base import FEASIBILITY_TOL
 from planner.robot import load_robot
-from planner.stability import BALANCE_MARGIN_M, support_margin_m, support_margins_ca
+from planner.stability import (
+    BALANCE_MARGIN_M,
+    support_margin_m,
+    support_margins_ca,
+    triangle_inradius_m,
+)
 from planner.terrain import load_terrain
 
 
@@ -84,5 +89,39 @@ def test_a_narrow_triangle_is_reported():
     start.feet_W[3, :2] = start.feet_W[2, :2] - [0.0, 0.03]  # HR 3 cm beside HL: a sliver
     sol = Theta2(robot, terrain, support=(0, 2, 3)).solve(
         start, start.feet_W[[0, 2, 3]].mean(axis=0) + 0.15 * u_n, u_f, u_n
+    )
+    assert not sol.feasible and "balance_margin" in sol.diagnosis
+
+
+def test_inradius_is_the_largest_margin_in_the_triangle():
+    rng = np.random.default_rng(5)
+    tri = np.array([[0.0, 0.0, 0.0], [0.04, 0.0, 0.01], [0.0, 0.03, -0.02]])  # 3-4-5 x 1 cm
+    assert triangle_inradius_m(tri) == pytest.approx(0.01, abs=1e-12)
+    for _ in range(100):
+        tri = rng.uniform(-0.2, 0.2, (3, 3))
+        r = triangle_inradius_m(tri)
+        sides = [np.linalg.norm(tri[(k + 2) % 3, :2] - tri[(k + 1) % 3, :2]) for k in range(3)]
+        incentre = sum(s * p for s, p in zip(sides, tri, strict=True)) / sum(sides)
+        assert support_margin_m(tri, incentre) == pytest.approx(r, abs=1e-9)
+        w = rng.dirichlet(np.ones(3), 50)  # points inside never have a larger margin
+        assert max(support_margin_m(tri, q) for q in w @ tri) <= r + 1e-12
+    assert triangle_inradius_m(np.array([[0, 0, 0], [1, 1, 0], [2, 2, 0]])) == 0.0
+
+
+def test_a_triangle_narrower_than_the_margin_holds_no_com(dog):
+    """The look-ahead of LocalPlanner.leaves_no_support against Theta2 itself."""
+    from planner.local.soft import SoftPlanner
+
+    terrain, placed, u_f, u_n = _placed(dog, "flat", 0.3)
+    start = placed.state.copy()
+    planner = SoftPlanner(dog, terrain)
+    ahead = start.feet_W[0] + [0.06, 0.0, 0.0]  # FL's usual step: HR (next) keeps a stance
+    assert not planner.leaves_no_support(start, 0, ahead)
+    narrow = start.feet_W[1] + [0.08, 0.0, 0.0]  # FL in front of FR: FL, FR, HL a sliver
+    assert planner.leaves_no_support(start, 0, narrow)
+    start.feet_W[0] = narrow
+    assert triangle_inradius_m(start.feet_W[[0, 1, 2]]) < BALANCE_MARGIN_M
+    sol = Theta2(dog, terrain, support=(0, 1, 2)).solve(
+        start, start.feet_W[[0, 1, 2]].mean(axis=0) + 0.15 * u_n, u_f, u_n
     )
     assert not sol.feasible and "balance_margin" in sol.diagnosis

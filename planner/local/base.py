@@ -23,17 +23,19 @@ from planner import interrupts
 from planner.footholds import best_and_shortest, foothold_candidates
 from planner.heuristics import (
     EDGE_MARGIN_M,
+    body_clearance_height_m,
     foothold_hazard,
     frame_from_directions,
     lambda_c,
     lambda_t,
     nominal_height_m,
+    reach_height_cap_m,
     reference_directions,
     safe_foothold,
     support_body_target_W,
 )
 from planner.interpolate import default_clearance_m, interpolate_leaf, interpolate_swing
-from planner.kinematics import kinematics_of
+from planner.kinematics import hip_centre_B, kinematics_of
 from planner.leg_swing import joint_space_swing
 from planner.links import leg_links
 from planner.local.gait_queue import CRAWL
@@ -41,7 +43,12 @@ from planner.problems import Theta1, Theta2, Theta3, Theta4, ThetaOptions
 from planner.problems.base import ConstraintCheck
 from planner.robot import LEG_NAMES
 from planner.rolling import end_keyframe
-from planner.stability import PATH_BALANCE_MARGIN_M, support_margin_m
+from planner.stability import (
+    BALANCE_MARGIN_M,
+    PATH_BALANCE_MARGIN_M,
+    support_margin_m,
+    triangle_inradius_m,
+)
 from planner.state import State
 from planner.torques import TorqueCheck
 from planner.trajectory import Trajectory
@@ -56,6 +63,8 @@ KNEE_CHOICE_LOOKAHEAD = 0.5  # fraction of a stride the body is moved ahead to j
 KNEE_CHOICE_FOOT_ZONE_M = 0.03  # (link points this near the foot centre do not count)
 OTHER_FOOTHOLDS = 8  # footholds tried when the body cannot get ready for Lambda_t's
 CANDIDATE_POOL = 40  # candidates scored before the best and the shortest are picked
+CANDIDATE_LATERAL_M = 0.05  # other footholds within this of the failed one sideways [m]
+DEAD_END_LATERAL_M = 0.08  # ... of the nominal placement, when the foothold is a dead end
 TARGET_RADIUS_M = 0.01  # a placed foot lands within this of its (edge-free) target [m]
 WIDE_TARGET_RADIUS_M = 0.04  # ... or this, when the leg's links forbid the near footholds
 # joint torque / URDF effort the servos may need to hold a sample, in the force distribution
@@ -209,6 +218,10 @@ class LocalPlanner:
         self.mu = float(terrain.spec.get("friction", 0.7) if mu is None else mu)
         self.settings = settings or LocalSettings()
         self.kin = kinematics_of(robot)
+        self._sink = False  # body targets lowered where a leg is stretched (step's back-off)
+        self._hips_B = np.array(
+            [lg.points_B[0] if hip_centre_B(lg) is None else hip_centre_B(lg) for lg in robot.legs]
+        )
         self._theta2: dict[tuple[tuple[int, ...], bool], Theta2] = {}
         self._theta3: dict[int, Theta3] = {}
         self._via_theta1: dict[tuple[int, ...], Theta1] = {}
@@ -286,10 +299,7 @@ class LocalPlanner:
         moves it to the nearest point of the sharp terrain without an edge under the foot
         (beyond the paper). ``hazard`` is "" or why no safe point was found nearby.
         """
-        rc = self.body_target(state, leg, shrink, tau=tau)
-        ahead = state.copy()
-        ahead.base_position_W = np.array(rc, float)
-        target = lambda_t(self.robot, self.terrain, ahead, leg, tau, step_m=step_m)
+        target = self.stride_target(state, leg, tau, step_m, shrink)
         u_f, _ = reference_directions(tau, self.terrain, target)
         return safe_foothold(
             self.terrain,
@@ -301,13 +311,31 @@ class LocalPlanner:
             not_behind_W=state.feet_W[leg],
         )
 
+    def stride_target(
+        self, state: State, leg: int, tau: Trajectory, step_m: float, shrink: float | None = None
+    ) -> np.ndarray:
+        """Lambda_t (eq. 13) with the body at r_c*: the leg's nominal placement, edges ignored."""
+        rc = self.body_target(state, leg, shrink, tau=tau)
+        ahead = state.copy()
+        ahead.base_position_W = np.array(rc, float)
+        return lambda_t(self.robot, self.terrain, ahead, leg, tau, step_m=step_m)
+
     def other_footholds(
-        self, state: State, leg: int, tau: Trajectory, tried_W, shrink: float | None = None
+        self,
+        state: State,
+        leg: int,
+        tau: Trajectory,
+        tried_W,
+        shrink: float | None = None,
+        centre_W=None,
+        max_lateral_m: float = CANDIDATE_LATERAL_M,
+        keep=None,
     ) -> list[np.ndarray]:
         """Footholds to try when the body cannot get ready for ``tried_W`` (issue 15 item 1).
 
-        :func:`planner.footholds.foothold_candidates` around ``tried_W`` at the body pose
-        the move aims for (COM at r_c*), ``tried_W`` itself left out, best-scored and
+        :func:`planner.footholds.foothold_candidates` within ``max_lateral_m`` of
+        ``centre_W`` (default ``tried_W``) at the body pose the move aims for (COM at r_c*),
+        ``tried_W`` itself and those failing ``keep(point)`` left out, best-scored and
         shortest alternating (:func:`planner.footholds.best_and_shortest`).
         """
         rc = self.body_target(state, leg, shrink, tau=tau)
@@ -315,11 +343,13 @@ class LocalPlanner:
         R = frame_from_directions(u_f, u_n)
         body_W = rc - R @ self.kin.com_B(state.joints_rad, self.settings.theta.whole_body_com)
         tried = np.asarray(tried_W, float)
+        centre = tried if centre_W is None else np.asarray(centre_W, float).reshape(3)
         found = [
             c
             for c in foothold_candidates(
-                self.robot, self.terrain, leg, tried, u_f, body_W, R, self.mu,
-                not_behind_W=state.feet_W[leg], limit=CANDIDATE_POOL,
+                self.robot, self.terrain, leg, centre, u_f, body_W, R, self.mu,
+                not_behind_W=state.feet_W[leg], max_lateral_m=max_lateral_m,
+                limit=CANDIDATE_POOL, accept=keep,
             )
             if np.linalg.norm(c[:2] - tried[:2]) > TARGET_RADIUS_M
         ]  # fmt: skip
@@ -346,7 +376,36 @@ class LocalPlanner:
         heading = None
         if tau is not None:
             heading = tau.tangent(tau.closest_lambda(state.base_position_W))
-        return lambda_c(self.robot, self.terrain, state, leg, self.com_height_m(), k, feet, heading)
+        rc = lambda_c(self.robot, self.terrain, state, leg, self.com_height_m(), k, feet, heading)
+        if feet is None or tau is None or not self._sink:
+            return rc
+        # backing off from a failed step (:meth:`step`): lower where a leg would be
+        # stretched, not below the body box's clearance
+        sink = self._reach_sink_m(state, leg, rc, tau, swing_target_W)
+        if sink < 0.0:
+            floor = body_clearance_height_m(self.robot, self.terrain, rc, heading)
+            rc[2] = max(rc[2] + sink, min(rc[2], floor))
+        return rc
+
+    def _reach_sink_m(self, state: State, leg: int, rc, tau: Trajectory, swing_target_W):
+        """The body target's drop [m] that keeps every leg within reach (<= 0).
+
+        :func:`planner.heuristics.reach_height_cap_m` at the pose the move aims for: the
+        three stance legs on their feet, ``leg`` on its next foothold when given.
+        """
+        u_f, u_n = self.body_directions(tau, state, rc, leg, swing_target_W)
+        R = frame_from_directions(u_f, u_n)
+        body_W = rc - R @ self.kin.com_B(state.joints_rad, self.settings.theta.whole_body_com)
+        hips_W = self._hips_B @ R.T + body_W
+        feet = np.array(state.feet_W, float)
+        legs = [i for i in range(4) if i != leg]
+        if swing_target_W is not None:
+            feet[leg] = np.asarray(swing_target_W, float).reshape(3)
+            legs.append(leg)
+        centres = feet + self.robot.foot_radius_m * np.asarray(
+            self.terrain.normal(feet), float
+        ).reshape(4, 3)
+        return reach_height_cap_m(self.robot, hips_W, centres, legs)
 
     def _plane_feet(self, state: State, leg: int, swing_target_W=None):
         """The footholds the body follows, or None (the paper's u_n and height)."""
@@ -776,21 +835,51 @@ class LocalPlanner:
         ``OTHER_FOOTHOLDS`` others of the leg's reachable, safe region are tried
         (:meth:`other_footholds`, issue 15). A failed placement keeps the body move
         (``Step.moved``) of the first attempt: the robot stands safely on three legs there.
-        ``shrink`` overrides ``settings.shrink`` of Lambda_c. ``target_W``: the foothold to
-        try first (a terrain point, world frame; e.g. a precomputed plan's), instead of
-        Lambda_t's; ``try_others`` False: no other foothold is tried.
+        A foothold that would leave the gait's next leg no stance to swing from
+        (:meth:`leaves_no_support`) is tried after those around the leg's nominal
+        placement that do not. ``shrink`` overrides ``settings.shrink`` of Lambda_c.
+        ``target_W``: the foothold to try first (a terrain point, world frame; e.g. a
+        precomputed plan's), instead of Lambda_t's; ``try_others`` False: no other
+        foothold is tried.
         """
+        first = self._step_once(state, leg, tau, step_m, shrink, target_W, try_others)
+        if first.ok or not self.settings.follow_support or self._sink:
+            return first
+        # back off (issue 13 item 5): the same step with the body lowered wherever a leg
+        # would be stretched (:meth:`_reach_sink_m`); kept only when it succeeds
+        self._sink = True
+        try:
+            low = self._step_once(state, leg, tau, step_m, shrink, target_W, try_others)
+        finally:
+            self._sink = False
+        return low if low.ok else first
+
+    def _step_once(
+        self, state: State, leg: int, tau: Trajectory, step_m: float, shrink, target_W, try_others
+    ) -> Step:
+        """One attempt of :meth:`step` at the body height in force."""
         if target_W is not None:
             target = np.asarray(target_W, float).reshape(3)
         else:
             target, _ = self.foothold_target(state, leg, tau, step_m, shrink)
+        order = [target]  # the footholds to try, in order
+        extended = False  # the other footholds are in ``order``
+        if try_others and self.leaves_no_support(state, leg, target):
+            # a dead end for the next leg: first the footholds around the nominal placement
+            # (wider sideways: the stance width may have to change) that leave it a stance
+            order = self.other_footholds(
+                state, leg, tau, target, shrink,
+                centre_W=self.stride_target(state, leg, tau, step_m, shrink),
+                max_lateral_m=DEAD_END_LATERAL_M,
+                keep=lambda c: not self.leaves_no_support(state, leg, c),
+            ) + [target]  # fmt: skip
         first = None  # the first failure, reported when no foothold works
-        others = None
         k = 0
-        while k <= OTHER_FOOTHOLDS:
+        while k < len(order):
+            target = order[k]
             sol2, body_path = self.body_move(state, leg, tau, target, shrink)
             if k == 0 and not sol2.feasible:
-                # the paper's plain Theta2 (no swing-ready pose) for Lambda_t's foothold
+                # the paper's plain Theta2 (no swing-ready pose) for the first foothold
                 sol2, body_path = self.body_move(state, leg, tau, None, shrink)
             if not sol2.feasible:
                 step = Step(leg, False, state, None, None, [], [], "body_move", sol2.diagnosis)
@@ -807,13 +896,25 @@ class LocalPlanner:
                 break  # the COM cannot shift onto the other three legs: no foothold helps
             if not try_others:
                 break
-            if others is None:
-                others = self.other_footholds(state, leg, tau, target, shrink)
-            if k >= len(others):
-                break
-            target = others[k]
+            if not extended:
+                order += self.other_footholds(state, leg, tau, target, shrink)
+                extended = True
             k += 1
         return first
+
+    def leaves_no_support(self, state: State, leg: int, foothold_W) -> bool:
+        """Whether ``leg`` on ``foothold_W`` leaves the gait's next leg no stance to swing from.
+
+        The next leg of ``settings.gait`` swings on the other three feet; when their
+        triangle's inradius is below ``BALANCE_MARGIN_M`` no COM keeps Theta2's balance
+        margin on it (e.g. both front feet on one stepping stone: the hind legs can no
+        longer step). Beyond the paper: a one-step look-ahead of the foothold choice.
+        """
+        gait = list(self.settings.gait or CRAWL)
+        nxt = gait[(gait.index(leg) + 1) % len(gait)] if leg in gait else (leg + 1) % 4
+        feet = np.array(state.feet_W, float).reshape(4, 3)
+        feet[leg] = np.asarray(foothold_W, float).reshape(3)
+        return triangle_inradius_m(np.delete(feet, nxt, axis=0)) < BALANCE_MARGIN_M
 
     # ---- the loop ----------------------------------------------------------------------
     def plan(
