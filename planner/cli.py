@@ -154,9 +154,15 @@ def _cmd_plan(args) -> int:
             shown = ",".join(value) if isinstance(value, list) else f"{value:g}"
             print(f"{name}: {shown}")
         return 0
-    if args.goal is None:
+    if args.goal is None and str(terrain.name).startswith("gen:"):
+        from planner.course_gen import course_goal_xy
+
+        goal = course_goal_xy(terrain.spec)  # a generated course: walk to its end
+        print(f"goal: {goal[0]:g},{goal[1]:g} (the end of {terrain.name}; --goal to change)")
+    elif args.goal is None:
         raise InputError("--goal: required; give X,Y in metres (e.g. --goal 2.2,0)")
-    goal = _parse_xy(args.goal, "goal")
+    else:
+        goal = _parse_xy(args.goal, "goal")
     start = _parse_xy(args.start, "start")
     check_endpoints(robot, terrain, start, goal, ("--start", "--goal"))
     check_file(args.out, "--out")
@@ -294,7 +300,9 @@ def build_parser() -> argparse.ArgumentParser:
     pl = sub.add_parser("plan", help="plan a walk and write a stratawalk.plan/1 file")
     pl.add_argument("--robot", default="littledog")
     pl.add_argument("--terrain", required=True, help="terrain name or YAML path")
-    pl.add_argument("--goal", help="X,Y [m] (required unless --print-config)")
+    pl.add_argument(
+        "--goal", help="X,Y [m] (required unless --print-config; a gen:... course: its end)"
+    )
     pl.add_argument("--start", default="0.2,0", help="X,Y [m] (default 0.2,0)")
     pl.add_argument(
         "--planner",

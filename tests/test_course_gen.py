@@ -205,3 +205,14 @@ def test_a_generated_name_is_a_terrain_name(capsys):
     assert main(["terrain", "gen:-1"]) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "course 'gen:-1': seed" in err
+
+
+def test_plan_walks_to_a_generated_course_end_by_default(tmp_path, capsys):
+    out = tmp_path / "plan.json"
+    code = main(["plan", "--terrain", "gen:4:0.5:1", "--time-budget", "1", "--quiet",
+                 "--out", str(out)])  # fmt: skip
+    text = capsys.readouterr().out
+    assert code in (0, 1) and "goal: 1,0 (the end of gen:4:0.5:1" in text
+    assert main(["plan", "--terrain", "flat", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "--goal: required" in err
