@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from planner.heuristics import foothold_hazard, horizontal_axes
-from planner.kinematics import hip_centre_B
+from planner.kinematics import hip_point_B
 
 __all__ = ["foothold_candidates", "best_and_shortest"]
 
@@ -76,9 +76,7 @@ def foothold_candidates(
     """
     t = np.asarray(target_W, float).reshape(3)
     f, side = horizontal_axes(forward_W)
-    lg = robot.legs[leg]
-    hip_B = hip_centre_B(lg)
-    hip_B = lg.points_B[0] if hip_B is None else hip_B
+    hip_B = hip_point_B(robot.legs[leg])
     hip_W = np.asarray(body_rotation_W, float) @ hip_B + np.asarray(body_position_W, float)
     reach = float(robot.reach_m[leg])
     rho = float(robot.foot_radius_m)

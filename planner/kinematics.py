@@ -152,6 +152,12 @@ def hip_centre_B(leg: Leg) -> np.ndarray | None:
     return 0.5 * ((r1 + a * w1) + (r2 + b * w2))
 
 
+def hip_point_B(leg: Leg) -> np.ndarray:
+    """The point a leg's reach is measured from: :func:`hip_centre_B`, else its first joint."""
+    centre = hip_centre_B(leg)
+    return leg.points_B[0] if centre is None else centre
+
+
 def _wrap_into_limits(angle: float, lo: float, hi: float, tol: float = 1e-12) -> list[float]:
     out = []
     for k in (-1, 0, 1):

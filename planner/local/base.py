@@ -35,7 +35,7 @@ from planner.heuristics import (
     support_body_target_W,
 )
 from planner.interpolate import default_clearance_m, interpolate_leaf, interpolate_swing
-from planner.kinematics import hip_centre_B, kinematics_of
+from planner.kinematics import hip_point_B, kinematics_of
 from planner.leg_swing import joint_space_swing
 from planner.links import leg_links
 from planner.local.gait_queue import CRAWL
@@ -219,9 +219,7 @@ class LocalPlanner:
         self.settings = settings or LocalSettings()
         self.kin = kinematics_of(robot)
         self._sink = False  # body targets lowered where a leg is stretched (step's back-off)
-        self._hips_B = np.array(
-            [lg.points_B[0] if hip_centre_B(lg) is None else hip_centre_B(lg) for lg in robot.legs]
-        )
+        self._hips_B = np.array([hip_point_B(lg) for lg in robot.legs])
         self._theta2: dict[tuple[tuple[int, ...], bool], Theta2] = {}
         self._theta3: dict[int, Theta3] = {}
         self._via_theta1: dict[tuple[int, ...], Theta1] = {}
@@ -339,9 +337,7 @@ class LocalPlanner:
         shortest alternating (:func:`planner.footholds.best_and_shortest`).
         """
         rc = self.body_target(state, leg, shrink, tau=tau)
-        u_f, u_n = self.body_directions(tau, state, rc, leg)
-        R = frame_from_directions(u_f, u_n)
-        body_W = rc - R @ self.kin.com_B(state.joints_rad, self.settings.theta.whole_body_com)
+        u_f, R, body_W = self._body_pose_at(state, leg, tau, rc)
         tried = np.asarray(tried_W, float)
         centre = tried if centre_W is None else np.asarray(centre_W, float).reshape(3)
         found = [
@@ -393,9 +389,7 @@ class LocalPlanner:
         :func:`planner.heuristics.reach_height_cap_m` at the pose the move aims for: the
         three stance legs on their feet, ``leg`` on its next foothold when given.
         """
-        u_f, u_n = self.body_directions(tau, state, rc, leg, swing_target_W)
-        R = frame_from_directions(u_f, u_n)
-        body_W = rc - R @ self.kin.com_B(state.joints_rad, self.settings.theta.whole_body_com)
+        _, R, body_W = self._body_pose_at(state, leg, tau, rc, swing_target_W)
         hips_W = self._hips_B @ R.T + body_W
         feet = np.array(state.feet_W, float)
         legs = [i for i in range(4) if i != leg]
@@ -406,6 +400,16 @@ class LocalPlanner:
             self.terrain.normal(feet), float
         ).reshape(4, 3)
         return reach_height_cap_m(self.robot, hips_W, centres, legs)
+
+    def _body_pose_at(self, state: State, leg: int, tau: Trajectory, rc, swing_target_W=None):
+        """(u_f, body rotation, body origin) [world] of the pose with its COM at ``rc``.
+
+        The directions of :meth:`body_directions`, the COM offset of ``state``'s joints.
+        """
+        u_f, u_n = self.body_directions(tau, state, rc, leg, swing_target_W)
+        R = frame_from_directions(u_f, u_n)
+        body_W = rc - R @ self.kin.com_B(state.joints_rad, self.settings.theta.whole_body_com)
+        return u_f, R, body_W
 
     def _plane_feet(self, state: State, leg: int, swing_target_W=None):
         """The footholds the body follows, or None (the paper's u_n and height)."""

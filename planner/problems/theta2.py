@@ -34,7 +34,7 @@ import casadi as ca
 import numpy as np
 
 from planner import stability, statics
-from planner.kinematics import hip_centre_B
+from planner.kinematics import hip_point_B
 from planner.lie import coords_from_pose
 from planner.problems.base import (
     ThetaOptions,
@@ -94,9 +94,7 @@ class Theta2(ThetaProblem):
         self.constrain("contact", ca.vec(self.kin.feet_W_ca(pos, R, th)) - centres)
         # reach margin: no stance leg ends stretched to its reach (a singular leg cannot
         # follow the few millimetres its rolling foot moves, nor correct a tracking error)
-        hips_B = [
-            hip_centre_B(lg) if hip_centre_B(lg) is not None else lg.points_B[0] for lg in r.legs
-        ]
+        hips_B = [hip_point_B(lg) for lg in r.legs]
         centre_cols = ca.reshape(centres, 3, 4)
         stretch = [
             ca.sumsqr(ca.mtimes(R, ca.DM(hips_B[i])) + pos - centre_cols[:, i])
@@ -111,10 +109,7 @@ class Theta2(ThetaProblem):
             self.constrain("com", com - rc)
         if len(self.support) == 3:
             (leg,) = set(range(4)) - set(self.support)
-            lg = r.legs[leg]
-            hip_B = hip_centre_B(lg)
-            hip_B = lg.points_B[0] if hip_B is None else hip_B
-            hip_W = ca.mtimes(R, ca.DM(hip_B)) + pos
+            hip_W = ca.mtimes(R, ca.DM(hip_point_B(r.legs[leg]))) + pos
             target = self.par("swing_target_W", 3)
             reach = self.par("swing_reach_m", 1)
             d = hip_W - target
@@ -341,8 +336,7 @@ class Theta2(ThetaProblem):
         cen = p[self._p_slices["centres_W"]].reshape(4, 3)
         far = 0.0
         for i, lg in enumerate(self.robot.legs):
-            hip_B = hip_centre_B(lg)
-            hip_B = lg.points_B[0] if hip_B is None else hip_B
+            hip_B = hip_point_B(lg)
             d = float(
                 np.linalg.norm(state.base_rotation_W @ hip_B + state.base_position_W - cen[i])
             )
@@ -356,9 +350,7 @@ class Theta2(ThetaProblem):
         }
         if "swing_target_W" in self._p_slices:
             (leg,) = set(range(4)) - set(self.support)
-            lg = self.robot.legs[leg]
-            hip_B = hip_centre_B(lg)
-            hip_B = lg.points_B[0] if hip_B is None else hip_B
+            hip_B = hip_point_B(self.robot.legs[leg])
             hip_W = state.base_rotation_W @ hip_B + state.base_position_W
             d = float(np.linalg.norm(hip_W - p[self._p_slices["swing_target_W"]]))
             v["swing_ready"] = max(d - float(p[self._p_slices["swing_reach_m"]][0]), 0.0)
