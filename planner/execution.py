@@ -209,6 +209,32 @@ def planned_steps(plan: Plan) -> list[tuple[int, _Array]]:
     return out
 
 
+def plan_step_cycles(plan: Plan) -> list[tuple[int, int]] | None:
+    """Sample ranges (a, b) of the plan's steps, aligned with :func:`planned_steps`.
+
+    Step j runs from the touchdown that ends step j-1 (sample 0 for the first) to its own
+    touchdown, so it holds the body moves before its swing. None when the samples' swings
+    do not match the keyframes' (a plan edited by hand).
+    """
+    s = plan.samples
+    allc = s.contact.all(axis=1)
+    out, a, k = [], 0, 1
+    legs = []
+    while k < len(allc):
+        if allc[k - 1] and not allc[k]:
+            up = np.flatnonzero(~s.contact[k])
+            down = np.flatnonzero(allc[k:])
+            if len(up) != 1 or not down.size:
+                return None
+            b = k + int(down[0])
+            out.append((a, b))
+            legs.append(int(up[0]))
+            a, k = b, b + 1
+        else:
+            k += 1
+    return out if legs == [leg for leg, _ in planned_steps(plan)] else None
+
+
 def _queue_after(gait, leg: int):
     """A gait queue whose front is the leg after ``leg`` in ``gait``'s order."""
     from planner.local.gait_queue import GaitQueue
@@ -225,6 +251,7 @@ def run_feedback(
     local_settings=None,
     max_cycles: int | None = None,
     no_progress_cycles: int = 16,
+    correct_plan_steps: bool = True,
     **noise,
 ) -> SimResult:
     """Walk to the plan's goal re-planning every step from the measured state (8.3).
@@ -236,8 +263,13 @@ def run_feedback(
     tried first, body moves and swings planned anew from the measured state), since the
     plan has looked ahead where a greedy step from a state a few centimetres off may
     walk into a dead end (barrier75mm: the body over the barrier, a hind leg behind it
-    that no body move could free). After ``GUIDE_FAILS`` failed cycles in a row, or past
-    the plan's last step, the gait queue and Lambda_t take over. Measurements come from
+    that no body move could free). When no body move from the measured state reaches the
+    plan's foothold, the plan's own step is executed, corrected from the measured state as
+    in 8.4 (:func:`correct_cycle`; gen:14's trailing hind leg at a 7 cm step up, a hind leg
+    stretched on relief), unless the correction leaves a leg's reach or
+    ``correct_plan_steps`` is False. After
+    ``GUIDE_FAILS`` failed cycles in a row, or past the plan's last step, the gait queue
+    and Lambda_t take over. Measurements come from
     ``source`` (default:
     :class:`SimulatedMocap` of the simulator with ``noise``: position_noise_m,
     angle_noise_rad, joint_noise_rad, latency_s, seed). Stops at the goal, after
@@ -264,7 +296,9 @@ def run_feedback(
     n_plan = max(len(cycle_starts(plan.samples.contact)), 1)
     max_cycles = max_cycles if max_cycles is not None else 2 * n_plan + 20
     queue = GaitQueue(st.gait)
-    guide, g, followed = planned_steps(plan), 0, 0
+    guide, g, followed, corrected = planned_steps(plan), 0, 0, 0
+    guide_cycles = plan_step_cycles(plan) if correct_plan_steps else None
+    s_plan, centres = plan.samples, plan.foot_centres_W()
     step_scale = {i: 1.0 for i in range(4)}
     fails, cycles, steps, best, best_at = 0, 0, 0, math.inf, 0
     m = ex.monitor.metrics
@@ -301,6 +335,23 @@ def run_feedback(
                     if step.ok:
                         on_plan = True
                         break
+            if guided and not step.ok and step.phase == "body_move" and guide_cycles is not None:
+                # the plan's own step, corrected from the measured state (8.4): the plan
+                # passed here, where a step planned anew from a state a few centimetres
+                # off finds no body move (a hind leg stretched behind a step up)
+                a, b = guide_cycles[g]
+                ran = _follow_corrected(ex, src, robot, terrain, s_plan, centres, a, b, sim)
+                if ran is not None:
+                    why = f"{step.diagnosis}; executed the plan's step, corrected (8.4)"
+                    local._log_failure(cycles, leg, step.phase, state, why)
+                    g, fails, steps, corrected = g + 1, 0, steps + 1, corrected + 1
+                    m.cycles += 1
+                    if g == len(guide):
+                        queue = _queue_after(st.gait, leg)
+                    if not ran:
+                        message = f"fell at {m.fall_time_s:.1f} s ({m.fall_reason})"
+                        break
+                    continue
             # back off before giving a leg up: shorter steps over a more centred body (8.5's
             # ambitions); a failed body move leaves the robot standing where it was measured
             for frac, shrink in BACKOFF if step is None or not step.ok else ():
@@ -356,6 +407,7 @@ def run_feedback(
             "cycles": cycles,
             "plan_steps": len(guide),
             "plan_steps_followed": followed,  # landed on the plan's foothold
+            "plan_steps_corrected": corrected,  # the plan's own step, corrected (8.4)
             "planner_solves": local.stats,
             "planner_failures": local.failures[-50:],
         }
@@ -451,6 +503,46 @@ def blend_in(robot, q: _Array, contact: NDArray, times: _Array, current_joints: 
         if w > 0.0:
             out[k] = robot.q_from(q[k, :3], q[k, 3:7], robot.joints_from_q(q[k]) + w * jump)
     return out
+
+
+def _follow_corrected(ex, src, robot, terrain, s: Samples, centres, a: int, b: int, sim):
+    """Execute plan samples a..b corrected from the measured state (8.4), or None.
+
+    One correction, at ``a``, for the whole step. None, with nothing executed, when the
+    corrected samples leave a leg's reach, bring the COM (Pinocchio, of the corrected
+    joints) within ``PATH_BALANCE_MARGIN_M`` of a three-foot support's edge (the plan's
+    balance is kept only where every foot is where the plan had it, up to one common
+    offset), or put a thigh or shank on the sharp terrain deeper than at the start (the
+    plan's swing over an edge, from a body a few centimetres off, hit barrier75mm);
+    else whether the robot is still standing.
+    """
+    from planner.kinematics import kinematics_of
+    from planner.lie import rotation_from_quat
+    from planner.links import leg_links
+    from planner.stability import PATH_BALANCE_MARGIN_M, support_margin_m
+
+    times, contact = s.time[a : b + 1], s.contact[a : b + 1]
+    q, misses = correct_cycle(
+        robot, s.q[a : b + 1], contact, centres[a : b + 1], src.measure(), times, sim.targets()
+    )
+    if misses:
+        return None
+    kin, links = kinematics_of(robot), leg_links(robot)
+    floor = None
+    for qk, ck in zip(q, contact, strict=True):
+        bare = links.path_margin(terrain, qk, np.flatnonzero(~ck), scale=0.0)
+        floor = np.minimum(bare, 0.0) if floor is None else floor
+        if np.any(bare < floor - 1e-4):
+            return None
+        if ck.sum() != 3:
+            continue
+        R, joints = rotation_from_quat(qk[3:7]), robot.joints_from_q(qk)
+        feet = kin.feet_W(qk[:3], R, joints)[ck]
+        com = qk[:3] + R @ kin.com_B(joints)
+        if support_margin_m(feet, com) < PATH_BALANCE_MARGIN_M:
+            return None
+    ex.monitor.keyframe(0)
+    return ex.follow(times, q, contact)
 
 
 def run_corrected(

@@ -7,6 +7,7 @@ from planner.cli import main
 from planner.execution import (
     Measurement,
     SimulatedMocap,
+    plan_step_cycles,
     planned_steps,
     run_corrected,
     run_feedback,
@@ -243,7 +244,7 @@ def test_feedback_backs_off_instead_of_giving_up(short_plan, monkeypatch):
         return real(self, state, leg, tau, step_m, shrink, target_W, try_others)
 
     monkeypatch.setattr(LocalPlanner, "step", step)
-    res = run_feedback(short_plan, max_cycles=4)
+    res = run_feedback(short_plan, max_cycles=4, correct_plan_steps=False)
     m = res.metrics
     assert m.replans == 0 and res.executed.stats["feedback"]["steps"] == 4, m.summary()
     assert not (m.fell or m.tipped), m.summary()
@@ -261,6 +262,43 @@ def test_planned_steps_are_the_plans_swings_and_landings(short_plan):
         moved = np.linalg.norm(foot[:2] - kf.feet[leg][:2])  # the swing keyframe: lifted
         # forward (a stride, or a shorter step: at least min_step_fraction of it), grounded
         assert MIN_ADVANCE_M < moved < 0.12 and abs(foot[2]) < 1e-3
+
+
+def test_plan_step_cycles_hold_each_planned_swing(short_plan):
+    """Step j's samples run from step j-1's touchdown to its own, lifting only its leg."""
+    steps, cycles = planned_steps(short_plan), plan_step_cycles(short_plan)
+    assert cycles is not None and len(cycles) == len(steps)
+    c = short_plan.samples.contact
+    assert cycles[0][0] == 0
+    for (a, b), (a2, _), (leg, _) in zip(cycles, cycles[1:] + [(None, None)], steps, strict=True):
+        assert c[a].all() and c[b].all() and (a2 is None or a2 == b)
+        lifted = np.flatnonzero(~c[a : b + 1].all(axis=0))
+        assert list(lifted) == [leg]
+
+
+def test_feedback_falls_back_on_the_plans_step_corrected(short_plan, monkeypatch):
+    """No body move from the measured state reaches the plan's foothold: the plan's own step,
+    corrected from the measurement (8.4), carries the walk on, landing on that foothold."""
+    from planner.local.base import LocalPlanner
+
+    real = LocalPlanner.step
+
+    def step(self, state, leg, tau, step_m, shrink=None, target_W=None, try_others=True):
+        out = real(self, state, leg, tau, step_m, shrink, target_W, try_others)
+        if target_W is not None:  # the plan's foothold: refused
+            out.ok, out.moved, out.end, out.phase = False, None, None, "body_move"
+            out.diagnosis = "refused by the test"
+        return out
+
+    monkeypatch.setattr(LocalPlanner, "step", step)
+    res = run_feedback(short_plan, max_cycles=3)
+    m, fb = res.metrics, res.executed.stats["feedback"]
+    assert fb["plan_steps_corrected"] == fb["steps"] == 3 and m.ik_misses == 0, m.summary()
+    assert not (m.fell or m.tipped), m.summary()
+    kfs = res.executed.keyframes  # measured at the start of each cycle
+    for k, (leg, foot) in enumerate(planned_steps(short_plan)[:2]):
+        landed = kfs[k + 1].feet[leg]
+        assert np.linalg.norm(landed[:2] - foot[:2]) < 0.015, (k, landed, foot)
 
 
 def test_feedback_follows_the_plans_footholds(short_plan):
