@@ -310,3 +310,39 @@ def test_feedback_follows_the_plans_footholds(short_plan):
     for k, (leg, foot) in enumerate(planned_steps(short_plan)[:3]):
         landed = kfs[k + 1].feet[leg]
         assert np.linalg.norm(landed[:2] - foot[:2]) < 0.015, (k, landed, foot)
+
+
+@pytest.mark.parametrize("gate", ["balance", "links"])
+def test_a_corrected_plan_step_that_fails_a_gate_is_not_executed(short_plan, monkeypatch, gate):
+    """The fallback refuses a corrected step whose COM nears a support edge or whose leg links
+    dip into the terrain: nothing is executed and the caller goes on replanning."""
+    import planner.links
+    import planner.stability
+    from planner.execution import _follow_corrected
+    from planner.simulate import new_run
+
+    if gate == "balance":  # no support triangle holds the COM 1 m inside it
+        monkeypatch.setattr(planner.stability, "PATH_BALANCE_MARGIN_M", 1.0)
+    else:  # after the first sample every link 1 m inside the terrain
+        real = planner.links.LegLinks.path_margin
+        calls = []
+
+        def deeper(self, terrain, q, swing_legs=(), scale=1.0):
+            calls.append(1)
+            return real(self, terrain, q, swing_legs, scale) - 1.0 * (len(calls) > 1)
+
+        monkeypatch.setattr(planner.links.LegLinks, "path_margin", deeper)
+    sim, ex = new_run(short_plan, None, "feedback")
+    robot, terrain = short_plan.load_robot(), short_plan.load_terrain()
+    a, b = plan_step_cycles(short_plan)[0]
+    t0 = sim.time
+    got = _follow_corrected(
+        ex, SimulatedMocap(sim), robot, terrain, short_plan.samples,
+        short_plan.foot_centres_W(), a, b, sim,
+    )  # fmt: skip
+    assert got is None and sim.time == t0
+    monkeypatch.undo()  # without the violation the same step runs
+    assert _follow_corrected(
+        ex, SimulatedMocap(sim), robot, terrain, short_plan.samples,
+        short_plan.foot_centres_W(), a, b, sim,
+    ) is True and sim.time > t0  # fmt: skip
