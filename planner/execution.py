@@ -266,8 +266,9 @@ def run_feedback(
     that no body move could free). When no body move from the measured state reaches the
     plan's foothold, the plan's own step is executed, corrected from the measured state as
     in 8.4 (:func:`correct_cycle`; gen:14's trailing hind leg at a 7 cm step up, a hind leg
-    stretched on relief), unless the correction leaves a leg's reach or
-    ``correct_plan_steps`` is False. After
+    stretched on relief), unless the corrected step fails a gate of
+    :func:`_follow_corrected` (reach, balance, leg links) or ``correct_plan_steps`` is
+    False. After
     ``GUIDE_FAILS`` failed cycles in a row, or past the plan's last step, the gait queue
     and Lambda_t take over. Measurements come from
     ``source`` (default:
@@ -304,7 +305,8 @@ def run_feedback(
     m = ex.monitor.metrics
     try:
         while True:
-            state = measured_state(robot, terrain, src.measure())
+            meas = src.measure()
+            state = measured_state(robot, terrain, meas)
             dist = float(np.linalg.norm(local.check.com_W(state)[:2] - goal))
             if dist < best - 0.01:
                 best, best_at = dist, cycles
@@ -340,7 +342,7 @@ def run_feedback(
                 # passed here, where a step planned anew from a state a few centimetres
                 # off finds no body move (a hind leg stretched behind a step up)
                 a, b = guide_cycles[g]
-                ran = _follow_corrected(ex, src, robot, terrain, s_plan, centres, a, b, sim)
+                ran = _follow_corrected(ex, meas, robot, terrain, s_plan, centres, a, b, sim)
                 if ran is not None:
                     why = f"{step.diagnosis}; executed the plan's step, corrected (8.4)"
                     local._log_failure(cycles, leg, step.phase, state, why)
@@ -505,16 +507,16 @@ def blend_in(robot, q: _Array, contact: NDArray, times: _Array, current_joints: 
     return out
 
 
-def _follow_corrected(ex, src, robot, terrain, s: Samples, centres, a: int, b: int, sim):
-    """Execute plan samples a..b corrected from the measured state (8.4), or None.
+def _follow_corrected(ex, meas, robot, terrain, s: Samples, centres, a: int, b: int, sim):
+    """Execute plan samples a..b corrected from the measurement ``meas`` (8.4), or None.
 
-    One correction, at ``a``, for the whole step. None, with nothing executed, when the
-    corrected samples leave a leg's reach, bring the COM (Pinocchio, of the corrected
-    joints) within ``PATH_BALANCE_MARGIN_M`` of a three-foot support's edge (the plan's
-    balance is kept only where every foot is where the plan had it, up to one common
-    offset), or put a thigh or shank on the sharp terrain deeper than at the start (the
-    plan's swing over an edge, from a body a few centimetres off, hit barrier75mm);
-    else whether the robot is still standing.
+    One correction, from the measurement the cycle was planned from, for the whole step.
+    None, with nothing executed, when the corrected samples leave a leg's reach, bring
+    the COM (Pinocchio, of the corrected joints) within ``PATH_BALANCE_MARGIN_M`` of a
+    three-foot support's edge (the plan's balance is kept only where every foot is where
+    the plan had it, up to one common offset), or put a thigh or shank on the sharp
+    terrain deeper than at the start (the plan's swing over an edge, from a body a few
+    centimetres off, hit barrier75mm); else whether the robot is still standing.
     """
     from planner.kinematics import kinematics_of
     from planner.lie import rotation_from_quat
@@ -523,7 +525,7 @@ def _follow_corrected(ex, src, robot, terrain, s: Samples, centres, a: int, b: i
 
     times, contact = s.time[a : b + 1], s.contact[a : b + 1]
     q, misses = correct_cycle(
-        robot, s.q[a : b + 1], contact, centres[a : b + 1], src.measure(), times, sim.targets()
+        robot, s.q[a : b + 1], contact, centres[a : b + 1], meas, times, sim.targets()
     )
     if misses:
         return None

@@ -337,12 +337,12 @@ def test_a_corrected_plan_step_that_fails_a_gate_is_not_executed(short_plan, mon
     a, b = plan_step_cycles(short_plan)[0]
     t0 = sim.time
     got = _follow_corrected(
-        ex, SimulatedMocap(sim), robot, terrain, short_plan.samples,
+        ex, SimulatedMocap(sim).measure(), robot, terrain, short_plan.samples,
         short_plan.foot_centres_W(), a, b, sim,
     )  # fmt: skip
     assert got is None and sim.time == t0
     monkeypatch.undo()  # without the violation the same step runs
     assert _follow_corrected(
-        ex, SimulatedMocap(sim), robot, terrain, short_plan.samples,
+        ex, SimulatedMocap(sim).measure(), robot, terrain, short_plan.samples,
         short_plan.foot_centres_W(), a, b, sim,
     ) is True and sim.time > t0  # fmt: skip
