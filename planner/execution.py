@@ -441,10 +441,18 @@ def correct_cycle(
     samples, foot sphere centres from FK. With ``times`` (n,) and ``current_joints``
     (12,, robot order; the set-points now), the jump from the current set-points to the
     corrected ones is spread over the cycle's four-feet phase (until the first lift-off).
+    The base starts at its measured pose and reaches the plan's (shifted by the feet's
+    mean offset) by the end of that four-feet phase: a plan's body attitude 16 degrees
+    from the measured one (gen:12:0.6) is turned to, not commanded at once.
     Returns (corrected q (n, 19), IK misses).
     """
     from planner.kinematics import kinematics_of
-    from planner.lie import rotation_from_quat
+    from planner.lie import (
+        quat_from_rotation,
+        rotation_from_quat,
+        rotation_from_vector,
+        vector_from_rotation,
+    )
 
     kin = kinematics_of(robot)
     c_meas = _foot_centres(robot, meas.q)
@@ -452,6 +460,16 @@ def correct_cycle(
     d = np.mean((c_meas - plan_centres[0])[down], axis=0) if down.any() else np.zeros(3)
     n = len(plan_q)
     out = plan_q.copy()
+    # the measured base relative to the plan's first (shifted) one, faded out over the
+    # four-feet phase: a world-frame rotation vector and a translation
+    up = np.flatnonzero(~np.asarray(plan_contact, bool).all(axis=1))
+    k_end = int(up[0]) - 1 if up.size else n - 1
+    rot_err = vector_from_rotation(
+        rotation_from_quat(meas.q[3:7]) @ rotation_from_quat(plan_q[0, 3:7]).T
+    )
+    pos_err = meas.q[:3] - (plan_q[0, :3] + d)
+    clock = np.arange(n, dtype=float) if times is None else np.asarray(times, float)
+    span = max(float(clock[max(k_end, 0)] - clock[0]), 1e-9)
     misses = 0
     lift = [None] * 4  # sample of lift-off and of touchdown, per leg
     for i in range(4):
@@ -462,8 +480,9 @@ def correct_cycle(
             kt = ks + int(after[0]) if after.size else n - 1
             lift[i] = (max(ks - 1, 0), kt)
     for k in range(n):
-        p = plan_q[k, :3] + d
-        R = rotation_from_quat(plan_q[k, 3:7])
+        w = 1.0 - min(float(clock[k] - clock[0]) / span, 1.0) if k_end > 0 else 0.0
+        p = plan_q[k, :3] + d + w * pos_err
+        R = rotation_from_vector(w * rot_err) @ rotation_from_quat(plan_q[k, 3:7])
         ref = robot.joints_from_q(plan_q[k])
         joints = np.empty((4, 3))
         for i in range(4):
@@ -478,7 +497,7 @@ def correct_cycle(
             res = kin.ik_leg(i, R.T @ (target - p), reference_rad=ref[i])
             misses += int(not res.reachable)
             joints[i] = res.joints_rad
-        out[k] = robot.q_from(p, plan_q[k, 3:7], joints)
+        out[k] = robot.q_from(p, quat_from_rotation(R) if w > 0.0 else plan_q[k, 3:7], joints)
     if times is not None and current_joints is not None:
         out = blend_in(robot, out, plan_contact, times, current_joints)
     return out, misses
