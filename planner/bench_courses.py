@@ -28,6 +28,7 @@ from planner.outputs import write_atomic
 
 __all__ = [
     "COURSES",
+    "GLOBAL_COURSES",
     "HARD_COURSES",
     "PLANNERS",
     "expand_courses",
@@ -61,7 +62,9 @@ HARD_COURSES = (
     "sparse_stones",
     "mix4m",
 )
-COURSE_GOALS = {"mix4m": (4.2, 0.0)}  # courses longer than the 2 m walk
+# issue 17's courses, walls and rocks the straight line runs into (planner "global")
+GLOBAL_COURSES = ("barrier15cm_opening", "maze_two_walls", "tall_rocks")
+COURSE_GOALS = {"mix4m": (4.2, 0.0), "maze_two_walls": (2.6, 0.0)}  # longer than 2 m
 PLANNERS = ("soft", "recursive")
 ROBOTS = ("littledog",)
 START_XY = (0.2, 0.0)
@@ -71,8 +74,8 @@ TIME_BUDGET_S = 240.0
 
 
 def expand_courses(names) -> tuple[str, ...]:
-    """Course names with the groups 'named' (:data:`COURSES`) and 'hard' spelled out."""
-    groups = {"named": COURSES, "hard": HARD_COURSES}
+    """Course names with the groups 'named' (:data:`COURSES`), 'hard', 'global' spelled out."""
+    groups = {"named": COURSES, "hard": HARD_COURSES, "global": GLOBAL_COURSES}
     return tuple(dict.fromkeys(c for n in names for c in groups.get(n, (n,))))
 
 
@@ -256,9 +259,14 @@ def add_courses_parser(bench_sub) -> argparse.ArgumentParser:
     p.add_argument(
         "--courses",
         default="named,hard",
-        help="comma-separated terrains; 'named' = the 9 first courses, 'hard' = issue 15's 8",
+        help="comma-separated terrains; 'named' = the 9 first courses, 'hard' = issue 15's 8, "
+        "'global' = issue 17's 3 (walls, rocks)",
     )
-    p.add_argument("--planners", default=",".join(PLANNERS), help="soft,hard,recursive")
+    p.add_argument(
+        "--planners",
+        default=",".join(PLANNERS),
+        help="soft,hard,recursive,global (section 9 from the guide path)",
+    )
     p.add_argument("--time-budget", type=float, default=TIME_BUDGET_S, help="[s] per walk")
     p.add_argument("--out", default="bench/results", help="output folder")
     p.add_argument("--scheduler", help="tcp://HOST:PORT of a running Dask scheduler")
@@ -282,9 +290,9 @@ def cmd_courses(args) -> int:
         return out
 
     planners = names(args.planners, "planners")
-    bad = [p for p in planners if p not in ("soft", "hard", "recursive")]
+    bad = [p for p in planners if p not in ("soft", "hard", "recursive", "global")]
     if bad:
-        raise InputError(f"--planners: unknown '{bad[0]}'; use soft, hard, recursive")
+        raise InputError(f"--planners: unknown '{bad[0]}'; use soft, hard, recursive, global")
     if not args.time_budget > 0:
         raise InputError(f"--time-budget: must be > 0 s, got {args.time_budget}")
     result = run_course_bench(

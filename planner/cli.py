@@ -80,7 +80,21 @@ def _cmd_terrain(args) -> int:
         check_file(args.png, "--png", suffixes=(".png",))
     terrain = load_terrain(args.name)
     print(f"terrain {terrain.name}: bounds {terrain.bounds}")
-    if args.png:
+    if args.png and args.guide is not None:  # the robot's cost map and the guide path
+        from planner.guide_path import guide_path
+        from planner.robot import load_robot
+        from planner.terrain_plot import plot_guide_map
+
+        start, goal = _parse_xy(args.start, "start"), _parse_xy(args.guide, "guide")
+        g = guide_path(load_robot(args.robot), terrain, start, goal, height_m=0.0)
+        what = g.message or f"guide path {g.tau.length_m:.2f} m"
+        title = (
+            f"{terrain.name}: cost map for {args.robot} (max step {100 * g.map.max_step_m:.1f} "
+            f"cm, half-width {100 * g.map.half_width_m:.1f} cm); {what}"
+        )
+        plot_guide_map(g.map, g.xy_W if g.tau is not None else None, args.png, title)
+        print(f"{what}; wrote {args.png}")
+    elif args.png:
         from planner.terrain_plot import plot_top_view
 
         plot_top_view(terrain, args.png)
@@ -191,7 +205,12 @@ def _cmd_plan(args) -> int:
         if getattr(args, "global_plan", False):  # section 9: CMA-ES over tau
             from planner.global_plan import GlobalSettings, plan_global_walk, print_progress
 
-            gs = GlobalSettings(terms=args.terms, max_generations=args.generations, seed=user.seed)
+            gs = GlobalSettings(
+                terms=args.terms,
+                max_generations=args.generations,
+                seed=user.seed,
+                guide=not args.no_guide,
+            )
             plan, report = plan_global_walk(
                 args.robot, terrain, goal, start, args.planner, settings, gs,
                 None if args.quiet else print_progress, user.mu,
@@ -296,6 +315,11 @@ def build_parser() -> argparse.ArgumentParser:
     t = sub.add_parser("terrain", help="list terrains, or describe/draw one")
     t.add_argument("name", nargs="?", help="terrain name (terrains/NAME.yaml) or YAML path")
     t.add_argument("--png", help="write a top view with height colours to this PNG")
+    t.add_argument(
+        "--guide", metavar="X,Y", help="with --png: draw ROBOT's cost map and the guide path to X,Y"
+    )
+    t.add_argument("--start", default="0.2,0", metavar="X,Y", help="the guide path's start")
+    t.add_argument("--robot", default="littledog", help="the robot of --guide's cost map")
     t.set_defaults(func=_cmd_terrain)
     pl = sub.add_parser("plan", help="plan a walk and write a stratawalk.plan/1 file")
     pl.add_argument("--robot", default="littledog")
@@ -330,7 +354,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--global",
         dest="global_plan",
         action="store_true",
-        help="section 9: CMA-ES over sine-series trajectories (--time-budget per candidate)",
+        help="section 9: from the guide path around obstacles (or the straight line where it "
+        "is clear), CMA-ES over sine-series trajectories if that does not reach "
+        "(--time-budget per candidate)",
+    )
+    pl.add_argument(
+        "--no-guide", action="store_true", help="--global from the straight line (the paper's tau0)"
     )
     pl.add_argument("--terms", type=int, default=3, help="sine terms of --global's tau")
     pl.add_argument("--generations", type=int, default=8, help="CMA-ES generations (--global)")

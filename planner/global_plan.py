@@ -5,7 +5,9 @@ The paper leaves section 9 unimplemented and C open. Here:
 Trajectories (eq. 15)
     tau = tau0 + sum_{p=1..P} sin(p pi (lambda - lambda_a) / (lambda_b - lambda_a)) A_p,
     tau0 the straight line the local planner follows by default
-    (:meth:`~planner.trajectory.Trajectory.straight`) and
+    (:meth:`~planner.trajectory.Trajectory.straight`) or, where that line crosses an
+    obstacle on the robot's cost map, the guide path around it
+    (:mod:`planner.guide_path`, beyond the paper), and
     :meth:`~planner.trajectory.Trajectory.sine_series` the sum. Only **lateral** offsets are
     searched: A_p = a_p n, n the horizontal unit normal of tau0 (left of start -> goal).
     Offsets along a straight tau0 only re-parametrise it, and tau's height matters to the
@@ -38,6 +40,10 @@ Optimiser
     process pool (one local planner per process, its Theta problems built once per
     process and reused). tau0 itself is evaluated with the first generation: C(tau0) is
     "the local planner alone".
+
+    tau0 is evaluated first, in this process; when it reaches the goal (and validates)
+    the search stops there (``GlobalSettings.refine_reached`` searches on): ``--global``
+    costs one local plan where the straight line or the guide path is walkable.
 """
 
 from __future__ import annotations
@@ -103,6 +109,9 @@ class GlobalSettings:
         generation that reaches).
     workers : processes evaluating candidates (default: the machine's cores).
     seed : CMA-ES random seed (>= 1; cma reads 0 as "from the clock").
+    guide : tau0 is the guide path (:mod:`planner.guide_path`) where the straight line
+        crosses an obstacle; False: always the straight line (the paper's tau0).
+    refine_reached : search with CMA-ES even when tau0 itself reaches the goal.
     """
 
     terms: int = 3
@@ -115,6 +124,8 @@ class GlobalSettings:
     tol: float = 0.05
     workers: int | None = None
     seed: int = 1
+    guide: bool = True
+    refine_reached: bool = False
     weights: CostWeights = field(default_factory=CostWeights)
 
     def check(self) -> None:
@@ -274,14 +285,20 @@ class _Problem:
     goal_xy: tuple[float, float]
     weights: CostWeights
     seed: int = 1
+    tau0_xy: list | None = None  # the guide path's xy points (N, 2); None: straight
 
 
 def _init_worker(problem: _Problem) -> None:
     """Load robot and terrain once per process; the Theta problem caches live here too."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
+    _load(problem)
+
+
+def _load(problem: _Problem) -> None:
+    """What :func:`_evaluate` needs, in this process (a worker, or the parent for tau0)."""
     from planner.robot import load_robot
     from planner.terrain import Terrain
 
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
     terrain = Terrain.from_spec(problem.terrain_spec, base_dir=problem.terrain_base_dir)
     _WORKER.clear()
     _WORKER.update(
@@ -293,9 +310,31 @@ def _init_worker(problem: _Problem) -> None:
     )
 
 
-def _tau0(local, start_xy, goal_xy) -> Trajectory:
-    """The local planner's own default tau (base.LocalPlanner.plan)."""
+def _tau0(local, start_xy, goal_xy, tau0_xy=None) -> Trajectory:
+    """The local planner's own default tau (base.LocalPlanner.plan), or the guide path."""
+    if tau0_xy is not None:
+        return Trajectory.over_terrain(tau0_xy, local.terrain, local.com_height_m(), kind="guide")
     return Trajectory.straight(start_xy, goal_xy, local.terrain, local.com_height_m())
+
+
+def guide_tau0_xy(robot, terrain, start_xy, goal_xy) -> tuple[list | None, str]:
+    """(xy points of the guide path, or None for the straight line; what was decided).
+
+    The straight line is kept where it stays on the free cells of the robot's cost map
+    (:func:`planner.guide_path.traversability_map`): the map's relief cost is a hint, and
+    a detour the local planner does not need costs steps.
+    """
+    from planner.guide_path import guide_path
+
+    g = guide_path(robot, terrain, start_xy, goal_xy, height_m=0.0)
+    a, b = np.asarray(start_xy, float)[:2], np.asarray(goal_xy, float)[:2]
+    n = max(2, int(np.ceil(float(np.linalg.norm(b - a)) / (0.5 * g.map.resolution_m))))
+    line = a + np.linspace(0.0, 1.0, n)[:, None] * (b - a)
+    if g.map.free(line).all():
+        return None, "the straight line is clear of obstacles"
+    if g.tau is None:
+        return None, f"no guide path ({g.message}): the straight line"
+    return g.xy_W.tolist(), f"guide path around obstacles, {g.tau.length_m:.2f} m"
 
 
 _NO_WALK = {
@@ -315,7 +354,8 @@ def _evaluate(a_m: list[float], generation: int = 0):
     robot, terrain = _WORKER["robot"], _WORKER["terrain"]
     local = PLANNERS[pb.planner](robot, terrain, settings=pb.settings)
     local._theta2, local._theta3 = _WORKER["theta2"], _WORKER["theta3"]  # built once
-    tau = candidate_trajectory(_tau0(local, pb.start_xy, pb.goal_xy), a_m, pb.start_xy, pb.goal_xy)
+    tau0 = _tau0(local, pb.start_xy, pb.goal_xy, pb.tau0_xy)
+    tau = candidate_trajectory(tau0, a_m, pb.start_xy, pb.goal_xy)
     try:
         result = local.plan(pb.start_xy, pb.goal_xy, tau=tau)
     except PlannerError as exc:  # e.g. no initial stance along this tau: as bad as no step
@@ -409,13 +449,45 @@ def plan_global_walk(
     start = (float(start_xy[0]), float(start_xy[1]))
     goal = (float(goal_xy[0]), float(goal_xy[1]))
     lateral_coefficients(np.zeros(1), start, goal)  # start != goal
-    check_endpoints(load_robot(robot), t, start, goal)
+    robot_model = load_robot(robot)
+    check_endpoints(robot_model, t, start, goal)
     spec = t.spec if mu is None else dict(t.spec, friction=float(mu))  # workers read the spec
-    problem = _Problem(
-        robot, spec, base, planner, settings or LocalSettings(), start, goal, gs.weights, gs.seed
-    )
-    workers = gs.workers or os.cpu_count() or 1
     t_begin = time.perf_counter()
+    tau0_xy, guide_note = None, "the straight line (guide off)"
+    if gs.guide:
+        tau0_xy, guide_note = guide_tau0_xy(robot_model, t, start, goal)
+    problem = _Problem(
+        robot, spec, base, planner, settings or LocalSettings(), start, goal, gs.weights, gs.seed,
+        tau0_xy,
+    )  # fmt: skip
+    workers = gs.workers or os.cpu_count() or 1
+    _load(problem)  # tau0 here: with the guide path it is often all there is to do
+    try:
+        tau0, tau0_plan = _evaluate([0.0] * gs.terms, 0)
+    finally:
+        _WORKER.clear()
+    history: list[dict] = []
+    best: tuple[Evaluation, object] | None = (tau0, tau0_plan) if tau0_plan else None
+    n_eval, generation, stale, stop = 1, 0, 0, ""
+    history.append(
+        {
+            "generation": 0,
+            "evaluations": 1,
+            "elapsed_s": time.perf_counter() - t_begin,
+            "best_cost": tau0.cost,
+            "best_reached": bool(tau0.reached),
+            "best_coefficients_m": tau0.coefficients_m,
+            "generation_costs": [round(tau0.cost, 3)],
+            "generation_reached": int(tau0.reached),
+            "sigma": gs.sigma0_m,
+            "tau0_cost": tau0.cost,
+            "tau0_kind": guide_note,
+        }
+    )
+    if progress is not None:
+        progress(history[-1])
+    if tau0.reached and not gs.refine_reached:
+        stop = "tau0 reached the goal (no search)"
     es = cma.CMAEvolutionStrategy(
         np.zeros(gs.terms),
         gs.sigma0_m,
@@ -427,29 +499,19 @@ def plan_global_walk(
             "maxiter": gs.max_generations,
         },
     )
-    history: list[dict] = []
-    best: tuple[Evaluation, object] | None = None
-    tau0: Evaluation | None = None
-    n_eval, generation, stale, stop = 0, 0, 0, ""
     ctx = mp.get_context("spawn")  # no fork of a process holding CasADi/threads
-    pool = ProcessPoolExecutor(workers, ctx, initializer=_init_worker, initargs=(problem,))
+    pool = None if stop else ProcessPoolExecutor(workers, ctx, _init_worker, (problem,))
     try:
         while not stop:
             generation += 1
             xs = es.ask()
             cands = [[float(v) for v in x] for x in xs]
-            if tau0 is None:
-                cands = [[0.0] * gs.terms, *cands]
             results = list(pool.map(_evaluate, cands, [generation] * len(cands)))
             n_eval += len(results)
             prev = best[0].cost if best is not None else math.inf
             for r in results:  # the cheapest candidate that has a plan
                 if r[1] is not None and (best is None or r[0].cost < best[0].cost):
                     best = r
-            if tau0 is None:
-                tau0 = results[0][0]
-                tau0.generation = 0
-                results = results[1:]
             es.tell(xs, [ev.cost for ev, _ in results])
             if best is not None and best[0].reached:
                 stale = stale + 1 if prev - best[0].cost <= gs.tol else 0
@@ -464,8 +526,6 @@ def plan_global_walk(
                 "generation_reached": sum(ev.reached for ev, _ in results),
                 "sigma": float(es.sigma),
             }
-            if generation == 1:
-                record["tau0_cost"] = tau0.cost
             history.append(record)
             if progress is not None:
                 progress(record)
@@ -482,17 +542,17 @@ def plan_global_walk(
     except KeyboardInterrupt:
         stop = f"interrupted in generation {generation}; the best plan so far is kept"
         procs = list((getattr(pool, "_processes", None) or {}).values())  # before shutdown
-        pool.shutdown(wait=False, cancel_futures=True)
+        if pool is not None:
+            pool.shutdown(wait=False, cancel_futures=True)
         for proc in procs:
             proc.terminate()
         if best is None:
             raise
     finally:
-        pool.shutdown(wait=True, cancel_futures=True)
+        if pool is not None:
+            pool.shutdown(wait=True, cancel_futures=True)
     if best is None:
-        raise NoSolutionFound(
-            f"global planning: no candidate tau got a plan ({tau0.message if tau0 else ''})"
-        )
+        raise NoSolutionFound(f"global planning: no candidate tau got a plan ({tau0.message})")
     elapsed = time.perf_counter() - t_begin
     ev, plan = best
     res = GlobalResult(ev, tau0, history, n_eval, generation, elapsed, stop)
@@ -500,7 +560,7 @@ def plan_global_walk(
     plan.stats["validation"] = {"ok": report.ok, "violations": report.by_kind()}
     if not report.ok:
         plan.outcome["reached_goal"] = False
-    plan.stats["global"] = res.to_dict()
+    plan.stats["global"] = res.to_dict() | {"tau0_kind": guide_note}
     plan.stats["global"]["settings"] = {k: v for k, v in asdict(gs).items() if k != "weights"} | {
         "weights": asdict(gs.weights),
         "workers": workers,
@@ -511,12 +571,18 @@ def plan_global_walk(
 def print_progress(record: dict, file=None) -> None:
     """A one-line report of a generation on stderr (for ``stratawalk plan --global``)."""
     file = file or sys.stderr
-    head = ""
-    if "tau0_cost" in record:
-        head = f"tau0 (local planner alone): C = {record['tau0_cost']:.2f}\n"
+    if record["generation"] == 0:
+        reached = "reached" if record["best_reached"] else "not reached"
+        print(
+            f"tau0 ({record.get('tau0_kind', 'the straight line')}): "
+            f"C = {record['tau0_cost']:.2f} ({reached}), {record['elapsed_s']:.0f} s",
+            file=file,
+            flush=True,
+        )
+        return
     reached = "reached" if record["best_reached"] else "not reached"
     print(
-        f"{head}generation {record['generation']}: {record['evaluations']} evaluations, "
+        f"generation {record['generation']}: {record['evaluations']} evaluations, "
         f"best C = {record['best_cost']:.2f} ({reached}, "
         f"a = {np.round(record['best_coefficients_m'], 3).tolist()} m), "
         f"{record['generation_reached']} reached this generation, "

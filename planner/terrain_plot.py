@@ -82,3 +82,44 @@ def plot_top_view(
     finally:
         plt.close(fig)
     return out
+
+
+def plot_guide_map(tmap, path_xy, path_png: str | Path, title: str) -> Path:
+    """Draw a robot's traversability map (:mod:`planner.guide_path`) and a guide path.
+
+    Free cells coloured by their cost (log scale), grown obstacles grey, the obstacles
+    themselves black; ``path_xy`` (N, 2) [m] or None.
+    """
+    ny, nx = tmap.cost.shape
+    res = tmap.resolution_m
+    extent = (
+        tmap.origin[0] - 0.5 * res,
+        tmap.origin[0] + (nx - 0.5) * res,
+        tmap.origin[1] - 0.5 * res,
+        tmap.origin[1] + (ny - 0.5) * res,
+    )
+    width_in = 10.0
+    fig, ax = plt.subplots(figsize=(width_in, min(max(width_in * ny / nx + 1.2, 3.0), 12.0)))
+    try:
+        cost = np.where(tmap.blocked, np.nan, np.log10(np.where(tmap.blocked, 1.0, tmap.cost)))
+        img = ax.imshow(cost, origin="lower", extent=extent, cmap="magma_r", vmin=0.0)
+        grey = np.where(tmap.blocked, 0.6, np.nan)
+        grey[tmap.obstacle] = 0.0
+        ax.imshow(grey, origin="lower", extent=extent, cmap="gray", vmin=0, vmax=1)
+        fig.colorbar(img, ax=ax, label="log10 cell cost", shrink=0.9)
+        if path_xy is not None:
+            xy = np.asarray(path_xy, float)
+            ax.plot(xy[:, 0], xy[:, 1], "c-", lw=2, label="guide path")
+            ax.plot(*xy[0], "go", label="start")
+            ax.plot(*xy[-1], "r*", ms=12, label="goal")
+            ax.legend(loc="upper right", fontsize=8)
+        ax.set_xlabel("x [m]")
+        ax.set_ylabel("y [m]")
+        ax.set_aspect("equal")
+        ax.set_title(title)
+        out = write_atomic(
+            path_png, lambda tmp: fig.savefig(tmp, dpi=120, bbox_inches="tight", format="png")
+        )
+    finally:
+        plt.close(fig)
+    return out

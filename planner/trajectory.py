@@ -142,14 +142,31 @@ class Trajectory:
         n = max(2, int(np.ceil(d_xy / spacing_m)) + 1)
         u = np.linspace(0.0, 1.0, n)
         xy = a[:2] + u[:, None] * (b[:2] - a[:2])
+        return Trajectory.over_terrain(xy, terrain, height_m, footprint_radius_m, "straight")
+
+    @staticmethod
+    def over_terrain(
+        xy_W: ArrayLike,
+        terrain: _HeightTerrain,
+        height_m: float,
+        footprint_radius_m: float = 0.1,
+        kind: str = "polyline",
+    ) -> PolylineTrajectory:
+        """A polyline through the points ``xy_W`` (N, 2), ``height_m`` over the terrain.
+
+        The height as in :meth:`straight` (which is this along a straight line): the
+        terrain max-filtered over the footprint disk, averaged over +-radius of arc length.
+        ``xy_W`` should be dense (a few cm apart): each point is a vertex.
+        """
+        xy = np.asarray(xy_W, dtype=float).reshape(-1, 2)
         ground = _ground_max(terrain, xy, footprint_radius_m)
         if footprint_radius_m > 0:
-            s = u * d_xy
+            s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(xy, axis=0), axis=1))])
             ground = np.array(
                 [ground[np.abs(s - si) <= footprint_radius_m + 1e-12].mean() for si in s]
             )
         pts = np.column_stack([xy, ground + float(height_m)])
-        return PolylineTrajectory(pts, kind="straight")
+        return PolylineTrajectory(_waypoints(pts, "Trajectory.over_terrain"), kind=kind)
 
     @staticmethod
     def sine_series(tau0: Trajectory, coefficients: ArrayLike) -> CurveTrajectory:

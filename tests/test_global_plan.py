@@ -120,8 +120,8 @@ def test_cli_has_the_global_flag():
 def test_global_planner_walks_through_the_opening_where_the_local_planner_is_stuck():
     """A shortened course: 1 m, 0.7 -> 1.7 with the wall in the middle (one sine term).
 
-    tau0 and the first generation (3 candidates) are evaluated together: two rounds of the
-    pool of 2. The full 2 m course with 3 terms is `stratawalk plan --global` (README).
+    The paper's straight tau0 (the guide path off: with it tau0 goes through the opening,
+    tests/test_guide_path.py), then generations of 3 candidates on a pool of 2.
     """
     plan, report = plan_global_walk(
         "littledog",
@@ -131,7 +131,7 @@ def test_global_planner_walks_through_the_opening_where_the_local_planner_is_stu
         planner="soft",
         settings=LocalSettings(time_budget_s=40.0, max_fails_in_row=4),
         global_settings=GlobalSettings(
-            terms=1, popsize=3, workers=2, patience=0, max_generations=3, seed=1
+            terms=1, popsize=3, workers=2, patience=0, max_generations=3, seed=1, guide=False
         ),
     )
     g = plan.stats["global"]
