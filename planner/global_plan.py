@@ -381,6 +381,7 @@ def _evaluate(a_m: list[float], generation: int = 0):
         plan, report = assemble_plan(
             robot, terrain, local.mu, pb.start_xy, pb.goal_xy, result, extra
         )
+    _WORKER["report"] = (plan, report)  # the parent's tau0 keeps its check (not pickled)
     reached = bool(plan.outcome["reached_goal"])
     margin = stability_margin_m(robot, local.check, result.keyframes)
     metrics = {
@@ -464,6 +465,7 @@ def plan_global_walk(
     _load(problem)  # tau0 here: with the guide path it is often all there is to do
     try:
         tau0, tau0_plan = _evaluate([0.0] * gs.terms, 0)
+        tau0_checked = _WORKER.get("report")
     finally:
         _WORKER.clear()
     history: list[dict] = []
@@ -556,7 +558,10 @@ def plan_global_walk(
     elapsed = time.perf_counter() - t_begin
     ev, plan = best
     res = GlobalResult(ev, tau0, history, n_eval, generation, elapsed, stop)
-    report = check_plan(plan)  # the parent's own check of what it returns
+    if tau0_checked is not None and tau0_checked[0] is plan:  # checked here already
+        report = tau0_checked[1]
+    else:
+        report = check_plan(plan)  # the parent's own check of a worker's plan
     plan.stats["validation"] = {"ok": report.ok, "violations": report.by_kind()}
     if not report.ok:
         plan.outcome["reached_goal"] = False
