@@ -304,3 +304,28 @@ def test_a_failed_step_is_tried_again_with_the_body_lower(flat_planner, monkeypa
     monkeypatch.setattr(planner, "_step_once", once)
     step = planner.step(start, 2, tau, planner.stride_m())
     assert seen == [False, True] and step.ok and not planner._sink
+
+
+def test_a_path_from_a_start_out_of_reach_may_only_come_back_into_reach(flat_planner):
+    """8.3's measured state can have a stretched leg out of the planner's reach (its foot
+    rolled): a path from there is accepted while the IK miss shrinks, not when it grows."""
+    from planner.trajectory import Trajectory
+
+    lp = flat_planner
+    tau = Trajectory.straight((0.2, 0.0), (1.0, 0.0), lp.terrain, lp.com_height_m())
+    start = lp.initial_state((0.2, 0.0), tau)
+
+    def path(misses):
+        out = []
+        for m in misses:
+            s = start.copy()
+            s.info = dict(start.info, ik_ok=m == 0.0, ik_error_m=m, unreachable_legs=[3] * (m > 0))
+            out.append(s)
+        return out
+
+    assert lp.path_problem(path([0.0, 0.0, 0.0])) == ""
+    assert lp.path_problem(path([0.004, 0.003, 0.001, 0.0, 0.0])) == ""
+    why = lp.path_problem(path([0.004, 0.003, 0.005, 0.0]))
+    assert "sample 2 of the path leaves the reach of HR" in why
+    # a path that left the reach after being in it is refused as before
+    assert "sample 2" in lp.path_problem(path([0.0, 0.0, 0.001, 0.0]))

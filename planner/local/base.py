@@ -708,17 +708,24 @@ class LocalPlanner:
         (:func:`planner.statics.static_feasibility`), with a margin of
         ``settings.balance_margin_frac`` x m g; on three legs the COM also stays
         ``planner.stability.PATH_BALANCE_MARGIN_M`` inside the support triangle. A start
-        that already lacks a clearance or torque margin (a measured state, 8.3)
-        is accepted; the path may not lose more.
+        that already lacks a clearance or torque margin, or has a leg out of reach (a
+        measured state, 8.3: a stretched leg whose foot rolled), is accepted; the path may
+        not lose more (the IK miss may only shrink until the leg is back in reach).
         """
         from planner.statics import static_feasibility
 
         mg = self.robot.total_mass_kg * 9.81
         need = self.settings.balance_margin_frac * mg
+        miss = 0.0  # a start out of reach (a measured state, 8.3): no farther out after it
         for k, s in enumerate(path):
             if not s.info.get("ik_ok", True):
+                err = float(s.info.get("ik_error_m", np.inf))
+                if k == 0 or err <= miss + 1e-6:
+                    miss = err if k == 0 else min(miss, err)
+                    continue
                 legs = ", ".join(LEG_NAMES[i] for i in s.info.get("unreachable_legs", []))
                 return f"sample {k} of the path leaves the reach of {legs or 'a leg'}"
+            miss = 0.0
         pts_B = self._bottom_B
         body_floor = BODY_CLEARANCE_M
         for k, s in enumerate(path):
