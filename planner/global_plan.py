@@ -38,8 +38,8 @@ Optimiser
     +-``bound_m``: derivative-free, since C is a planner run (noisy, discontinuous where a
     foothold switches). Each generation's candidates are evaluated in parallel in a
     process pool (one local planner per process, its Theta problems built once per
-    process and reused). tau0 itself is evaluated with the first generation: C(tau0) is
-    "the local planner alone".
+    process and reused). Once a candidate reaches, a candidate whose partial walk already
+    costs as much (length, steps and planning time so far) stops planning early.
 
     tau0 is evaluated first, in this process; when it reaches the goal (and validates)
     the search stops there (``GlobalSettings.refine_reached`` searches on): ``--global``
@@ -346,8 +346,18 @@ _NO_WALK = {
 }
 
 
-def _evaluate(a_m: list[float], generation: int = 0):
-    """C(tau(a)) in this worker: (Evaluation, plan with its caches dropped)."""
+class _Rejected(Exception):
+    """A candidate whose partial walk already costs at least the best one's C."""
+
+
+def _evaluate(a_m: list[float], generation: int = 0, bound: float = math.inf):
+    """C(tau(a)) in this worker: (Evaluation, plan with its caches dropped).
+
+    Early rejection with a finite ``bound`` (the best reaching candidate's C): after each
+    step the terms that can only grow (path length, steps so far, planning time so far)
+    are a lower bound of C; once it reaches ``bound`` planning stops, and the candidate
+    costs that bound plus the distance term of where it stopped (no plan kept).
+    """
     from planner.walk import PLANNERS
 
     pb: _Problem = _WORKER["problem"]
@@ -356,8 +366,35 @@ def _evaluate(a_m: list[float], generation: int = 0):
     local._theta2, local._theta3 = _WORKER["theta2"], _WORKER["theta3"]  # built once
     tau0 = _tau0(local, pb.start_xy, pb.goal_xy, pb.tau0_xy)
     tau = candidate_trajectory(tau0, a_m, pb.start_xy, pb.goal_xy)
+    w, t_start = pb.weights, time.perf_counter()
+    seen = {"distance_m": math.inf, "steps": 0, "lower_bound": 0.0}
+
+    def watch(distance_m: float, steps: int) -> None:
+        t = time.perf_counter() - t_start
+        lower = w.length_per_m * tau.length_m + w.per_step * steps + w.planning_per_s * t
+        seen.update(distance_m=float(distance_m), steps=int(steps), lower_bound=lower)
+        if lower >= bound:
+            raise _Rejected(f"rejected after {steps} steps: C >= {lower:.2f} >= the best's")
+
     try:
-        result = local.plan(pb.start_xy, pb.goal_xy, tau=tau)
+        result = local.plan(
+            pb.start_xy, pb.goal_xy, tau=tau, progress=watch if math.isfinite(bound) else None
+        )
+    except _Rejected as exc:
+        metrics = dict(
+            _NO_WALK,
+            steps=seen["steps"],
+            planning_time_s=time.perf_counter() - t_start,
+            distance_to_goal_m=seen["distance_m"],
+            path_length_m=float(tau.length_m),
+        )
+        cost = seen["lower_bound"] + w.goal_per_m * seen["distance_m"]
+        ev = Evaluation(
+            [float(v) for v in a_m], cost, validated=None, message=str(exc),
+            cost_terms={"rejected_lower_bound": seen["lower_bound"]}, generation=generation,
+            **metrics,
+        )  # fmt: skip
+        return ev, None
     except PlannerError as exc:  # e.g. no initial stance along this tau: as bad as no step
         d = float(np.hypot(pb.goal_xy[0] - pb.start_xy[0], pb.goal_xy[1] - pb.start_xy[1]))
         metrics = dict(_NO_WALK, distance_to_goal_m=d, path_length_m=float(tau.length_m))
@@ -508,7 +545,9 @@ def plan_global_walk(
             generation += 1
             xs = es.ask()
             cands = [[float(v) for v in x] for x in xs]
-            results = list(pool.map(_evaluate, cands, [generation] * len(cands)))
+            bound = best[0].cost if best is not None and best[0].reached else math.inf
+            n = len(cands)
+            results = list(pool.map(_evaluate, cands, [generation] * n, [bound] * n))
             n_eval += len(results)
             prev = best[0].cost if best is not None else math.inf
             for r in results:  # the cheapest candidate that has a plan

@@ -173,3 +173,24 @@ def test_a_candidate_the_planner_cannot_start_costs_as_much_as_no_progress(monke
     ev, plan = gp._evaluate([0.1])
     assert plan is None and not ev.reached and ev.validated is None
     assert ev.cost >= 100 * 1.0 + 50 and "initial placement" in ev.message
+
+
+def test_a_candidate_already_costlier_than_the_best_stops_early():
+    """Early rejection: once the length, steps and planning time of a partial walk add up to
+    the best candidate's C, planning stops; below that bound the same candidate walks on."""
+    from planner import global_plan as gp
+
+    problem = gp._Problem(
+        "littledog", load_terrain("flat").spec, None, "soft", LocalSettings(),
+        (0.2, 0.0), (0.5, 0.0), CostWeights(),
+    )  # fmt: skip
+    old = signal.getsignal(signal.SIGINT)
+    try:
+        gp._init_worker(problem)
+    finally:
+        signal.signal(signal.SIGINT, old)
+    ev, plan = gp._evaluate([0.0], 1, 0.3)  # the 0.3 m path alone costs 0.3
+    assert plan is None and not ev.reached and "rejected after 1 steps" in ev.message
+    assert ev.cost >= 0.3 and ev.steps == 1
+    ev, plan = gp._evaluate([0.0], 1, 100.0)
+    assert plan is not None and ev.reached and ev.steps > 1
