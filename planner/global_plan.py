@@ -55,7 +55,7 @@ import signal
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -350,24 +350,37 @@ class _Rejected(Exception):
     """A candidate whose partial walk already costs at least the best one's C."""
 
 
-def _evaluate(a_m: list[float], generation: int = 0, bound: float = math.inf):
+def _evaluate(
+    a_m: list[float], generation: int = 0, bound: float = math.inf, deadline: float = math.inf
+):
     """C(tau(a)) in this worker: (Evaluation, plan with its caches dropped).
+
+    ``deadline`` (``time.time()``, the search's time budget): the local planner's own
+    budget is cut to what is left of it; a candidate started after it is not planned.
 
     Early rejection with a finite ``bound`` (the best reaching candidate's C): after each
     step the terms that can only grow (path length, steps so far, planning time so far)
     are a lower bound of C; once it reaches ``bound`` planning stops, and the candidate
-    costs that bound plus the distance term of where it stopped (no plan kept).
+    costs that bound plus the distance term of where it stopped and the not-reached
+    penalty (no plan kept).
     """
     from planner.walk import PLANNERS
 
     pb: _Problem = _WORKER["problem"]
     robot, terrain = _WORKER["robot"], _WORKER["terrain"]
-    local = PLANNERS[pb.planner](robot, terrain, settings=pb.settings)
+    settings = pb.settings
+    left = deadline - time.time()
+    if left < settings.time_budget_s:
+        settings = replace(settings, time_budget_s=max(left, 1e-3))
+    local = PLANNERS[pb.planner](robot, terrain, settings=settings)
     local._theta2, local._theta3 = _WORKER["theta2"], _WORKER["theta3"]  # built once
     tau0 = _tau0(local, pb.start_xy, pb.goal_xy, pb.tau0_xy)
     tau = candidate_trajectory(tau0, a_m, pb.start_xy, pb.goal_xy)
     w, t_start = pb.weights, time.perf_counter()
     seen = {"distance_m": math.inf, "steps": 0, "lower_bound": 0.0}
+    if left <= 0.0:  # the search's time is up: as bad as a candidate that cannot start
+        seen["distance_m"] = float(np.hypot(*np.subtract(pb.goal_xy, pb.start_xy)))
+        bound = -math.inf
 
     def watch(distance_m: float, steps: int) -> None:
         t = time.perf_counter() - t_start
@@ -377,6 +390,8 @@ def _evaluate(a_m: list[float], generation: int = 0, bound: float = math.inf):
             raise _Rejected(f"rejected after {steps} steps: C >= {lower:.2f} >= the best's")
 
     try:
+        if bound == -math.inf:
+            raise _Rejected("not planned: the global search's time budget is spent")
         result = local.plan(
             pb.start_xy, pb.goal_xy, tau=tau, progress=watch if math.isfinite(bound) else None
         )
@@ -388,7 +403,7 @@ def _evaluate(a_m: list[float], generation: int = 0, bound: float = math.inf):
             distance_to_goal_m=seen["distance_m"],
             path_length_m=float(tau.length_m),
         )
-        cost = seen["lower_bound"] + w.goal_per_m * seen["distance_m"]
+        cost = seen["lower_bound"] + w.goal_per_m * seen["distance_m"] + w.not_reached
         ev = Evaluation(
             [float(v) for v in a_m], cost, validated=None, message=str(exc),
             cost_terms={"rejected_lower_bound": seen["lower_bound"]}, generation=generation,
@@ -547,7 +562,10 @@ def plan_global_walk(
             cands = [[float(v) for v in x] for x in xs]
             bound = best[0].cost if best is not None and best[0].reached else math.inf
             n = len(cands)
-            results = list(pool.map(_evaluate, cands, [generation] * n, [bound] * n))
+            deadline = time.time() + gs.time_budget_s - (time.perf_counter() - t_begin)
+            results = list(
+                pool.map(_evaluate, cands, [generation] * n, [bound] * n, [deadline] * n)
+            )
             n_eval += len(results)
             prev = best[0].cost if best is not None else math.inf
             for r in results:  # the cheapest candidate that has a plan

@@ -34,9 +34,10 @@ heights, with every length derived from the robot:
 The path: Dijkstra (scipy's ``csgraph``) on the 8-connected grid, an edge costing its
 length times the mean of its cells' costs; simplified (Douglas-Peucker, ``SIMPLIFY_M``,
 less where the simplified corners would cross blocked cells),
-smoothed (a cubic spline through the kept points, used only where it stays on free
-cells) and returned as a :class:`~planner.trajectory.Trajectory` at the COM height over
-the terrain, as the straight tau0.
+smoothed (a cubic spline through the kept points where it stays on free cells, then
+its corners rounded by relaxation over free cells) and returned as a
+:class:`~planner.trajectory.Trajectory` at the COM height over the terrain, as the
+straight tau0.
 """
 
 from __future__ import annotations
@@ -66,6 +67,7 @@ NEAR_WEIGHT = 2.0
 NEAR_SCALE_M = 0.1
 SIMPLIFY_M = 0.02  # Douglas-Peucker tolerance of the grid path
 SPACING_M = 0.02  # the returned path's vertex spacing
+RELAX_ROUNDS = 100  # corner rounding where the spline through the corners is not free
 MAX_CELLS = 2_000_000  # coarser cells beyond this many
 
 
@@ -245,6 +247,25 @@ def _dense(points: _Array, spacing: float) -> _Array:
     return np.column_stack([np.interp(u, s, points[:, 0]), np.interp(u, s, points[:, 1])])
 
 
+def _relax(xy: _Array, tmap: TraversabilityMap) -> _Array:
+    """Round the corners of a path (N, 2) without leaving the free cells.
+
+    ``RELAX_ROUNDS`` rounds of moving each inner point halfway to its neighbours' mean,
+    kept only where the point stays free; the ends stay. A Dijkstra path's corners make
+    the body turn on the spot (the local planner's heading follows tau's tangent): the
+    tall_rocks plan along the unrounded path got stuck.
+    """
+    out = np.array(xy, float)
+    for _ in range(RELAX_ROUNDS):
+        new = out.copy()
+        new[1:-1] += 0.5 * (0.5 * (out[:-2] + out[2:]) - out[1:-1])
+        ok = tmap.free(new)
+        ok[[0, -1]] = False
+        out[ok] = new[ok]
+    even = _dense(out, SPACING_M)  # evenly spaced again, where that stays free
+    return even if tmap.free(even).all() else out
+
+
 def guide_path(
     robot, terrain, start_xy, goal_xy, height_m: float, resolution_m: float = 0.01
 ) -> GuidePath:
@@ -286,12 +307,13 @@ def guide_path(
         xy = _dense(kept, SPACING_M)
         if tmap.free(xy).all():
             break
-    if len(kept) > 2:  # a spline through the kept corners, where it stays on free cells
+    if 2 < len(kept) < len(pts):  # a spline through the kept corners, if it stays free
         s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(kept, axis=0), axis=1))])
         smooth = CubicSpline(s, kept, axis=0, bc_type="natural")(
             np.linspace(0.0, s[-1], max(2, int(np.ceil(s[-1] / SPACING_M)) + 1))
         )
         if tmap.free(smooth).all():
             xy = smooth
+    xy = _relax(xy, tmap)
     tau = Trajectory.over_terrain(xy, terrain, height_m, kind="guide")
     return GuidePath(tau, tmap, float(dist[dst]), xy)

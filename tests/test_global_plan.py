@@ -1,4 +1,5 @@
 import signal
+import time
 
 import numpy as np
 import pytest
@@ -194,3 +195,7 @@ def test_a_candidate_already_costlier_than_the_best_stops_early():
     assert ev.cost >= 0.3 and ev.steps == 1
     ev, plan = gp._evaluate([0.0], 1, 100.0)
     assert plan is not None and ev.reached and ev.steps > 1
+    # the search's time budget spent: the candidate is not planned and costs not-reached
+    ev, plan = gp._evaluate([0.0], 1, 100.0, deadline=time.time() - 1.0)
+    assert plan is None and not ev.reached and ev.steps == 0 and "budget is spent" in ev.message
+    assert ev.cost >= CostWeights().not_reached + CostWeights().goal_per_m * 0.3 - 1e-9

@@ -65,8 +65,8 @@ def test_tall_rocks_are_blocked_and_the_guide_winds_between_them(robot):
     tmap = traversability_map(robot, terrain)
     g = guide_path(robot, terrain, (0.2, 0.0), (2.2, 0.0), height_m=0.15)
     assert g.tau is not None and not g.straight
+    assert tmap.free(g.xy_W).all()  # the path's vertices; between them, the heights:
     xy = g.tau.sample(0.01)[1][:, :2]
-    assert tmap.free(xy).all()
     # the path never comes within the half-width (less two cells) of a rock above max_step
     reach = tmap.half_width_m - 2 * tmap.resolution_m
     near = _clearance_to_tall_terrain(terrain, xy, reach, tmap.max_step_m)
