@@ -215,17 +215,19 @@ def render_markdown(result: dict[str, Any]) -> str:
         + ".",
         "",
         "reached = the COM within 5 cm of the goal *and* the plan passes `stratawalk check`; "
-        "ratio = planning time / time the walk takes to execute.",
+        "ratio = planning time / time the walk takes to execute; job = wall time of the whole "
+        "job (loading, planning, `check`): compare planners by it, since `global` plans "
+        "check their candidates inside their planning time.",
         "",
-        "| robot | course | planner | reached | validated | steps | planning [s] | walk [s] "
-        "| ratio | left [m] | note |",
-        "|---|---|---|---|---|---:|---:|---:|---:|---:|---|",
+        "| robot | course | planner | reached | validated | steps | planning [s] | job [s] "
+        "| walk [s] | ratio | left [m] | note |",
+        "|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---|",
     ]
     for r in result["rows"]:
         if r["status"] != "ok":
             note = r.get("error") or r["status"]
             lines.append(
-                f"| {r['robot']} | {r['terrain']} | {r['planner']} | - | - | - | - | - | - | - "
+                f"| {r['robot']} | {r['terrain']} | {r['planner']} | - | - | - | - | - | - | - | - "
                 f"| {note[:80]} |"
             )
             continue
@@ -240,7 +242,8 @@ def render_markdown(result: dict[str, Any]) -> str:
             f"| {r['robot']} | {r['terrain']} | {r['planner']} | "
             f"{'yes' if r['reached'] else 'no'} | {'yes' if r['validated'] else 'no'} | "
             f"{r['steps']} | {_f(r.get('planning_time_s'), '.1f')} | "
-            f"{_f(r.get('walk_time_s'), '.1f')} | {_f(r.get('time_ratio'), '.3f')} | "
+            f"{_f(r.get('wall_time_s'), '.1f')} | {_f(r.get('walk_time_s'), '.1f')} | "
+            f"{_f(r.get('time_ratio'), '.3f')} | "
             f"{_f(r.get('distance_to_goal_m'), '.3f')} | {note.replace('|', '/')} |"
         )
     ok = [r for r in result["rows"] if r["status"] == "ok"]
