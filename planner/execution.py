@@ -419,9 +419,11 @@ def run_feedback(
 
 def _path_times(n_body: int, n_swing: int, body_s: float, swing_s: float) -> _Array:
     """Plan times of a body path (n_body samples over body_s) then a swing (over swing_s)."""
+    from planner.local.base import swing_offsets_s
+
     t = list(np.linspace(0.0, body_s, n_body)) if n_body > 1 else [0.0]
     if n_swing > 1:
-        t += list(body_s + swing_s * np.arange(1, n_swing) / (n_swing - 1))
+        t += list(body_s + swing_offsets_s(n_swing, swing_s))  # the planner's landing
     return np.array(t)
 
 

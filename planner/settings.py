@@ -51,7 +51,7 @@ SETTINGS: tuple[Setting, ...] = (
     Setting("mu", "--mu", "float", "friction coefficient (overrides the terrain's)", 0.0, 5.0),
     Setting("step_m", "--step", "float", "stride of Lambda_t [m] (0.35 x leg reach)", 0.0, 1.0),
     Setting("body_speed_m_s", "--body-speed", "float", "speed of body moves [m/s]", 0.0, 1.0),
-    Setting("swing_time_s", "--swing-time", "float", "duration of one swing [s]", 0.0, 60.0),
+    Setting("swing_time_s", "--swing-time", "float", "swing [s] (x 5/3: slow landing)", 0.0, 60.0),
     Setting("clearance_m", "--swing-height", "float", "swing height over the terrain [m]", 0, 0.5),
     Setting(
         "theta.clearance_m", "--body-clearance", "float",

@@ -143,7 +143,8 @@ def test_animation_follows_the_samples(scene, walk):
     mag = np.linalg.norm(series.forces_W[:, 3], axis=1)
     on = mag * m_per_N > head + 1e-3
     assert on.sum() > len(t) // 2
-    np.testing.assert_allclose(length[on], mag[on] * m_per_N, rtol=1e-6)
+    # (float32 tracks: 1 um on a few cm, as the positions above)
+    np.testing.assert_allclose(length[on], mag[on] * m_per_N, rtol=1e-6, atol=1e-6)
     np.testing.assert_allclose(tip[:, 2], scale[:, 2])
     _, colour = _track(clips, "forces/HR/shaft/<object>", "material.color", times=t)
     assert np.all(colour[on, 1] > colour[on, 0])  # inside the cone: green
