@@ -266,29 +266,22 @@ def run_job(job: dict, keep_plan: bool = False) -> dict:
 
         np.random.seed(int(job["seed"]))
         budget = float(job["time_budget_s"])
+        where = (
+            _cached("robot", job["robot"]),
+            _cached("terrain", job["terrain"]),
+            tuple(job["goal"]),
+            tuple(job["start"]),
+        )
+        local = LocalSettings(time_budget_s=budget)
         if job["planner"] == "global":  # one worker: the batch runs jobs side by side
             from planner.global_plan import GlobalSettings, plan_global_walk
 
-            plan, report = plan_global_walk(
-                _cached("robot", job["robot"]),
-                _cached("terrain", job["terrain"]),
-                tuple(job["goal"]),
-                tuple(job["start"]),
-                "soft",
-                LocalSettings(time_budget_s=budget),
-                GlobalSettings(workers=1, time_budget_s=budget, seed=max(1, int(job["seed"]))),
-            )
+            gs = GlobalSettings(workers=1, time_budget_s=budget, seed=max(1, int(job["seed"])))
+            plan, report = plan_global_walk(*where, "soft", local, gs)
             # its planning time: the whole search (guide path, tau0, any CMA-ES generations)
             plan.stats["planning_time_s"] = float(plan.stats["global"]["elapsed_s"])
         else:
-            plan, report = plan_walk(
-                _cached("robot", job["robot"]),
-                _cached("terrain", job["terrain"]),
-                tuple(job["goal"]),
-                tuple(job["start"]),
-                job["planner"],
-                LocalSettings(time_budget_s=budget),
-            )
+            plan, report = plan_walk(*where, job["planner"], local)
         walk_s = float(plan.samples.time[-1])
         plan_s = float(plan.stats.get("planning_time_s", float("nan")))
         rec.update(

@@ -327,10 +327,7 @@ def guide_tau0_xy(robot, terrain, start_xy, goal_xy) -> tuple[list | None, str]:
     from planner.guide_path import guide_path
 
     g = guide_path(robot, terrain, start_xy, goal_xy, height_m=0.0)
-    a, b = np.asarray(start_xy, float)[:2], np.asarray(goal_xy, float)[:2]
-    n = max(2, int(np.ceil(float(np.linalg.norm(b - a)) / (0.5 * g.map.resolution_m))))
-    line = a + np.linspace(0.0, 1.0, n)[:, None] * (b - a)
-    if g.map.free(line).all():
+    if g.map.segment_free(start_xy, goal_xy):
         return None, "the straight line is clear of obstacles"
     if g.tau is None:
         return None, f"no guide path ({g.message}): the straight line"
@@ -377,10 +374,8 @@ def _evaluate(
     tau0 = _tau0(local, pb.start_xy, pb.goal_xy, pb.tau0_xy)
     tau = candidate_trajectory(tau0, a_m, pb.start_xy, pb.goal_xy)
     w, t_start = pb.weights, time.perf_counter()
-    seen = {"distance_m": math.inf, "steps": 0, "lower_bound": 0.0}
-    if left <= 0.0:  # the search's time is up: as bad as a candidate that cannot start
-        seen["distance_m"] = float(np.hypot(*np.subtract(pb.goal_xy, pb.start_xy)))
-        bound = -math.inf
+    d_start = float(np.hypot(*np.subtract(pb.goal_xy, pb.start_xy)))  # COM start to goal
+    seen = {"distance_m": d_start, "steps": 0, "lower_bound": 0.0}
 
     def watch(distance_m: float, steps: int) -> None:
         t = time.perf_counter() - t_start
@@ -390,7 +385,7 @@ def _evaluate(
             raise _Rejected(f"rejected after {steps} steps: C >= {lower:.2f} >= the best's")
 
     try:
-        if bound == -math.inf:
+        if left <= 0.0:  # as bad as a candidate that cannot start
             raise _Rejected("not planned: the global search's time budget is spent")
         result = local.plan(
             pb.start_xy, pb.goal_xy, tau=tau, progress=watch if math.isfinite(bound) else None
@@ -411,8 +406,7 @@ def _evaluate(
         )  # fmt: skip
         return ev, None
     except PlannerError as exc:  # e.g. no initial stance along this tau: as bad as no step
-        d = float(np.hypot(pb.goal_xy[0] - pb.start_xy[0], pb.goal_xy[1] - pb.start_xy[1]))
-        metrics = dict(_NO_WALK, distance_to_goal_m=d, path_length_m=float(tau.length_m))
+        metrics = dict(_NO_WALK, distance_to_goal_m=d_start, path_length_m=float(tau.length_m))
         cost, terms = trajectory_cost(pb.weights, **metrics)
         ev = Evaluation(
             [float(v) for v in a_m],

@@ -110,6 +110,11 @@ class TraversabilityMap:
         out[inside] = ~self.blocked[ji[inside, 1], ji[inside, 0]]
         return out
 
+    def segment_free(self, a_xy, b_xy) -> bool:
+        """Whether the straight segment from ``a_xy`` to ``b_xy`` stays on free cells."""
+        ends = np.array([np.asarray(a_xy, float)[:2], np.asarray(b_xy, float)[:2]])
+        return bool(self.free(_dense(ends, 0.5 * self.resolution_m)).all())
+
 
 @dataclass
 class GuidePath:
