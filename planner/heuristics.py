@@ -262,25 +262,30 @@ def support_body_target_W(
     grad = pitch_slope * ex + roll_slope * ey
     n = np.array([-grad[0], -grad[1], 1.0])
     n /= np.linalg.norm(n)
-    return max(z, body_clearance_height_m(robot, terrain, xy, ex)), n
+    return max(z, body_clearance_height_m(robot, terrain, xy, ex, n)), n
 
 
-def body_clearance_height_m(robot: Robot, terrain, xy: ArrayLike, heading_W: ArrayLike) -> float:
+def body_clearance_height_m(
+    robot: Robot, terrain, xy: ArrayLike, heading_W: ArrayLike, normal_W: ArrayLike | None = None
+) -> float:
     """Least body target height [m] over ``xy`` for the body box to clear the terrain.
 
     The box's bottom (its footprint around ``xy``, facing ``heading_W``) stays
     ``BODY_TARGET_CLEARANCE_M`` over the highest sharp terrain under it (a barrier, an edge).
+    ``normal_W``: the body's up axis (default vertical); the bottom of a pitched body
+    lies lower behind the origin (nose up) or ahead of it (nose down), of a rolled one on
+    one side.
     """
-    ex = np.asarray(heading_W, float)[:2]
-    ex = ex / max(float(np.linalg.norm(ex)), 1e-9)
-    ey = np.array([-ex[1], ex[0]])
+    n = np.array([0.0, 0.0, 1.0]) if normal_W is None else np.asarray(normal_W, float)
+    h = np.asarray(heading_W, float).ravel()
+    R = frame_from_directions(np.array([h[0], h[1], 0.0]), n / np.linalg.norm(n))
     lo, hi = np.asarray(robot.body_box_B, float)
     nu, nv = (int(np.ceil((hi[k] - lo[k]) / BODY_FOOTPRINT_GRID_M)) + 1 for k in (0, 1))
     u, v = np.meshgrid(np.linspace(lo[0], hi[0], nu), np.linspace(lo[1], hi[1], nv))
-    X = float(xy[0]) + u * ex[0] + v * ey[0]
-    Y = float(xy[1]) + u * ex[1] + v * ey[1]
-    top = float(np.max(terrain.height_sharp(X.ravel(), Y.ravel())))
-    return top - float(lo[2]) + BODY_TARGET_CLEARANCE_M
+    face_B = np.column_stack([u.ravel(), v.ravel(), np.full(u.size, lo[2])])
+    off = face_B @ R.T  # the bottom face's points from the origin, world axes
+    top = np.asarray(terrain.height_sharp(float(xy[0]) + off[:, 0], float(xy[1]) + off[:, 1]))
+    return float(np.max(top - off[:, 2])) + BODY_TARGET_CLEARANCE_M
 
 
 # ---- reference directions and the body pose on tau (sections 7.2-7.3) -----------------------

@@ -259,8 +259,19 @@ def test_support_target_keeps_the_terrain_roll_and_clears_a_barrier(littledog):
     tilt = np.array([0.0, -0.2, 1.0]) / np.hypot(0.2, 1.0)
     z, n = support_body_target_W(littledog, barrier, feet, [0.0, 0.0], 0.147, [1, 0, 0], tilt)
     np.testing.assert_allclose(n, tilt, atol=1e-12)  # level feet: the terrain's roll stays
-    lo = np.asarray(littledog.body_box_B)[0]
-    assert z == pytest.approx(0.1 - lo[2] + BODY_TARGET_CLEARANCE_M, abs=1e-9)
+    # the rolled body's bottom face, placed with its origin at z: its lowest point over the
+    # barrier's top is the clearance above it (1 mm: the footprint's xy is taken untilted)
+    lo, hi = np.asarray(littledog.body_box_B)
+    x_ax = np.array([1.0, 0.0, 0.0]) - n[0] * n
+    R = np.column_stack([x_ax / np.linalg.norm(x_ax), np.cross(n, x_ax / np.linalg.norm(x_ax)), n])
+    u, v = np.meshgrid(np.linspace(lo[0], hi[0], 67), np.linspace(lo[1], hi[1], 23))
+    face_W = np.column_stack([u.ravel(), v.ravel(), np.full(u.size, lo[2])]) @ R.T + [0, 0, z]
+    over = face_W[np.abs(face_W[:, 0]) <= 0.015]
+    assert float(over[:, 2].min()) - 0.1 == pytest.approx(BODY_TARGET_CLEARANCE_M, abs=1e-3)
+    level = support_body_target_W(
+        littledog, barrier, feet, [0.0, 0.0], 0.147, [1, 0, 0], [0.0, 0.0, 1.0]
+    )[0]
+    assert level == pytest.approx(0.1 - lo[2] + BODY_TARGET_CLEARANCE_M, abs=1e-9)
 
 
 def test_support_tilt_is_bounded(littledog):

@@ -4,6 +4,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+import planner.local.base as base_module
 from planner.local.base import OTHER_FOOTHOLDS
 from planner.local.gait_queue import CRAWL, GaitQueue
 from planner.local.soft import SoftPlanner
@@ -285,7 +286,13 @@ def test_a_failed_step_is_tried_again_with_the_body_lower(flat_planner, monkeypa
     planner._sink = True
     low = planner.body_target(stretched, 1, tau=tau)
     assert low[2] < high[2] - 0.005 and np.allclose(low[:2], high[:2])
-    assert planner._reach_sink_m(stretched, 1, low, tau, None) > -1e-9  # now within reach
+    fraction = base_module.TARGET_REACH_FRACTION
+    assert planner._reach_sink_m(stretched, 1, low, tau, None, fraction) > -1e-9  # in reach
+    # without backing off the target sinks too, less: within ALWAYS_REACH_FRACTION
+    always = base_module.ALWAYS_REACH_FRACTION
+    assert always > fraction
+    assert planner._reach_sink_m(stretched, 1, high, tau, None, always) > -1e-9
+    assert planner._reach_sink_m(stretched, 1, high, tau, None, fraction) < -0.005
     assert planner.body_target(start, 1, tau=tau)[2] == pytest.approx(  # nothing stretched
         SoftPlanner(planner.robot, planner.terrain).body_target(start, 1, tau=tau)[2]
     )

@@ -270,3 +270,49 @@ def test_theta2_tilt_stays_within_max_tilt_of_u_n(dog):
         tilts[deg] = np.degrees(np.arccos(sol.state.base_rotation_W[2, 2]))
     assert tilts[80.0] > 8.0  # free, it rolls
     assert tilts[3.0] <= 3.0 + 1e-4  # bounded
+
+
+def test_touchdown_joints_keep_off_their_limits(dog):
+    """Theta3 (and Theta2's landing joints) stay LANDING_LIMIT_MARGIN_RAD inside the URDF
+    limits, so the swing can lift the foot off along the normal again (its pre-pose)."""
+    from planner.kinematics import kinematics_of
+    from planner.problems.base import LANDING_LIMIT_MARGIN_RAD, landing_bounds_rad
+
+    terrain, placed, _, _ = _placed(dog, "flat", 0.3)
+    start, leg = placed.state, 1  # FR, pulled far outward: the hip roll would hit its stop
+    sol = Theta3(dog, terrain, leg=leg).solve(start, start.feet_W[leg] + [0.0, -0.1, 0.0])
+    assert sol.feasible, sol.diagnosis
+    lo, hi = landing_bounds_rad(dog, leg)
+    np.testing.assert_allclose(lo, dog.lower_rad[leg] + LANDING_LIMIT_MARGIN_RAD)
+    th = sol.state.joints_rad[leg]
+    assert np.all(th >= lo - 1e-9) and np.all(th <= hi + 1e-9)
+    assert th[0] == pytest.approx(lo[0], abs=1e-3)  # the bound is what holds it
+    # the sphere centre 1 cm up from the touch-down is reachable (same knee branch)
+    kin = kinematics_of(dog)
+    up_B = kin.foot_B(leg, th) + sol.state.base_rotation_W.T @ [0.0, 0.0, 0.01]
+    ik = kin.ik_leg(leg, up_B, reference_rad=th, knee=kin.knee_direction(leg, th))
+    assert ik.reachable and not ik.knee_flipped
+
+
+def test_theta2_retry_starts_turned_to_the_reference_directions(dog):
+    """Theta2's second start (after an infeasible first solve): the body turned to
+    (u_f, u_n), its COM moved toward r_c*, the legs on the same foot centres (the leaf)."""
+    from planner.heuristics import frame_from_directions
+    from planner.lie import pose_from_coords
+
+    terrain, placed, u_f, _ = _placed(dog, "step5cm", None)
+    start = placed.state
+    problem = Theta2(dog, terrain, support=(1, 2, 3))
+    pitch = np.radians(15.0)
+    u_n = np.array([-np.sin(pitch), 0.0, np.cos(pitch)])
+    rc = problem.check.com_W(start) + [0.02, 0.0, 0.01]
+    p = problem.params(start, rc, u_f, u_n)
+    x0 = problem.initial_guess(start, p, turned=True)
+    T = pose_from_coords(np.concatenate([problem.x_block(x0, "p"), problem.x_block(x0, "phi")]))
+    np.testing.assert_allclose(T[:3, :3], frame_from_directions(u_f, u_n), atol=1e-9)
+    joints = problem.x_block(x0, "theta").reshape(4, 3)
+    feet = problem.kin.feet_W(T[:3, 3], T[:3, :3], joints)
+    centres = p[problem._p_slices["centres_W"]].reshape(4, 3)
+    np.testing.assert_allclose(feet, centres, atol=1e-8)
+    sol = problem.solve(start, rc, u_f, u_n)
+    assert sol.feasible, sol.diagnosis

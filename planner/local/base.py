@@ -24,6 +24,7 @@ from planner import interrupts
 from planner.footholds import best_and_shortest, foothold_candidates
 from planner.heuristics import (
     EDGE_MARGIN_M,
+    TARGET_REACH_FRACTION,
     body_clearance_height_m,
     foothold_hazard,
     frame_from_directions,
@@ -68,6 +69,10 @@ OTHER_FOOTHOLDS = 8  # footholds tried when the body cannot get ready for Lambda
 CANDIDATE_POOL = 40  # candidates scored before the best and the shortest are picked
 CANDIDATE_LATERAL_M = 0.05  # other footholds within this of the failed one sideways [m]
 DEAD_END_LATERAL_M = 0.08  # ... of the nominal placement, when the foothold is a dead end
+# every body target sinks where a leg would be stretched beyond this share of its reach
+# (a crawl stance on flat ground reaches 0.94 before a hind leg swings, untouched): with
+# three feet up a 10 cm step the footholds' plane put the body 4 cm too high for the fourth
+ALWAYS_REACH_FRACTION = 0.95
 TARGET_RADIUS_M = 0.01  # a placed foot lands within this of its (edge-free) target [m]
 WIDE_TARGET_RADIUS_M = 0.04  # ... or this, when the leg's links forbid the near footholds
 # joint torque / URDF effort the servos may need to hold a sample, in the force distribution
@@ -215,6 +220,10 @@ class LocalPlanner:
     """
 
     name = "local"
+    # :meth:`step` prefers footholds after which the gait's next leg still finds a body
+    # move (:meth:`next_leg_can_move`): the recursive planner's (8.5) look-ahead. Off for
+    # the greedy planners: on barrier75mm it let soft take footholds that stalled later
+    foothold_lookahead = False
 
     def __init__(self, robot, terrain, mu: float | None = None, settings=None):
         self.robot = robot
@@ -230,6 +239,7 @@ class LocalPlanner:
         self.stats = {
             "theta1": [0, 0],
             "theta2": [0, 0],
+            "theta2_lookahead": [0, 0],
             "theta3": [0, 0],
             "theta4": [0, 0],
             "swing_ik": [0, 0],
@@ -377,18 +387,22 @@ class LocalPlanner:
         if tau is not None:
             heading = tau.tangent(tau.closest_lambda(state.base_position_W))
         rc = lambda_c(self.robot, self.terrain, state, leg, self.com_height_m(), k, feet, heading)
-        if feet is None or tau is None or not self._sink:
+        if feet is None or tau is None:
             return rc
-        # backing off from a failed step (:meth:`step`): lower where a leg would be
-        # stretched, not below the body box's clearance
-        sink = self._reach_sink_m(state, leg, rc, tau, swing_target_W)
+        # lower where a leg would be stretched, not below the body box's clearance: always
+        # beyond ALWAYS_REACH_FRACTION, and to TARGET_REACH_FRACTION when backing off from
+        # a failed step (:meth:`step`)
+        fraction = TARGET_REACH_FRACTION if self._sink else ALWAYS_REACH_FRACTION
+        sink = self._reach_sink_m(state, leg, rc, tau, swing_target_W, fraction)
         if sink < 0.0:
             floor = body_clearance_height_m(self.robot, self.terrain, rc, heading)
             rc[2] = max(rc[2] + sink, min(rc[2], floor))
         return rc
 
-    def _reach_sink_m(self, state: State, leg: int, rc, tau: Trajectory, swing_target_W):
-        """The body target's drop [m] that keeps every leg within reach (<= 0).
+    def _reach_sink_m(
+        self, state: State, leg: int, rc, tau: Trajectory, swing_target_W, fraction: float
+    ):
+        """The body target's drop [m] that keeps every leg within ``fraction`` of reach (<= 0).
 
         :func:`planner.heuristics.reach_height_cap_m` at the pose the move aims for: the
         three stance legs on their feet, ``leg`` on its next foothold when given.
@@ -403,7 +417,7 @@ class LocalPlanner:
         centres = feet + self.robot.foot_radius_m * np.asarray(
             self.terrain.normal(feet), float
         ).reshape(4, 3)
-        return reach_height_cap_m(self.robot, hips_W, centres, legs)
+        return reach_height_cap_m(self.robot, hips_W, centres, legs, fraction)
 
     def _body_pose_at(self, state: State, leg: int, tau: Trajectory, rc, swing_target_W=None):
         """(u_f, body rotation, body origin) [world] of the pose with its COM at ``rc``.
@@ -852,7 +866,10 @@ class LocalPlanner:
         (``Step.moved``) of the first attempt: the robot stands safely on three legs there.
         A foothold that would leave the gait's next leg no stance to swing from
         (:meth:`leaves_no_support`) is tried after those around the leg's nominal
-        placement that do not. ``shrink`` overrides ``settings.shrink`` of Lambda_c.
+        placement that do not. With ``foothold_lookahead`` a foothold after which the next
+        leg finds no body move is passed over for the next one that leaves it one (the
+        first such step is returned when none does). ``shrink`` overrides
+        ``settings.shrink`` of Lambda_c.
         ``target_W``: the foothold to try first (a terrain point, world frame; e.g. a
         precomputed plan's), instead of Lambda_t's; ``try_others`` False: no other
         foothold is tried.
@@ -889,6 +906,7 @@ class LocalPlanner:
                 keep=lambda c: not self.leaves_no_support(state, leg, c),
             ) + [target]  # fmt: skip
         first = None  # the first failure, reported when no foothold works
+        dead_end = None  # the first step made that leaves the next leg no body move
         k = 0
         while k < len(order):
             target = order[k]
@@ -901,11 +919,23 @@ class LocalPlanner:
             else:
                 sol3, swing_path = self.swing(sol2.state, leg, tau, step_m, target)
                 if sol3.feasible:
-                    return Step(leg, True, state, sol2.state, sol3.state, body_path, swing_path)
-                step = Step(
-                    leg, False, state, sol2.state, None, body_path, [], "foot_placement",
-                    sol3.diagnosis,
-                )  # fmt: skip
+                    made = Step(leg, True, state, sol2.state, sol3.state, body_path, swing_path)
+                    if (
+                        not try_others
+                        or not self.foothold_lookahead
+                        or self.next_leg_can_move(sol3.state, leg, tau, shrink)
+                    ):
+                        return made
+                    dead_end = dead_end or made
+                    step = Step(
+                        leg, False, state, sol2.state, None, body_path, [], "foot_placement",
+                        "the foothold leaves the next leg no body move",
+                    )  # fmt: skip
+                else:
+                    step = Step(
+                        leg, False, state, sol2.state, None, body_path, [], "foot_placement",
+                        sol3.diagnosis,
+                    )  # fmt: skip
             first = first or step
             if "balance_margin" in step.diagnosis and step.phase == "body_move" and k == 0:
                 break  # the COM cannot shift onto the other three legs: no foothold helps
@@ -915,7 +945,34 @@ class LocalPlanner:
                 order += self.other_footholds(state, leg, tau, target, shrink)
                 extended = True
             k += 1
-        return first
+        return dead_end or first
+
+    def next_leg_can_move(self, state: State, leg: int, tau: Trajectory, shrink=None) -> bool:
+        """Whether the gait's next leg finds a body move (plain Theta2) after ``leg``'s step.
+
+        Beyond the paper: a one-step look-ahead of the foothold choice. Climbing a step the
+        front feet reach far ahead onto it while the hind feet stay below; a foothold that
+        leaves no body pose keeping the next leg's stance within reach and balance is a
+        dead end (the soft planner would stall there). When every foothold tried is one,
+        :meth:`step` returns the first that was made.
+        """
+        return self.legs_can_move(state, [self._next_leg(leg)], tau, shrink)
+
+    def legs_can_move(self, state: State, legs, tau: Trajectory, shrink=None) -> bool:
+        """Whether each of ``legs`` finds a body move onto the other three (plain Theta2)."""
+        for nxt in legs:
+            rc = self.body_target(state, nxt, shrink, tau=tau)
+            u_f, u_n = self.body_directions(tau, state, rc, nxt)
+            sol = self.theta2(tuple(i for i in range(4) if i != nxt)).solve(state, rc, u_f, u_n)
+            self._count("theta2_lookahead", sol.feasible)
+            if not sol.feasible:
+                return False
+        return True
+
+    def _next_leg(self, leg: int) -> int:
+        """The leg after ``leg`` in ``settings.gait``."""
+        gait = list(self.settings.gait or CRAWL)
+        return gait[(gait.index(leg) + 1) % len(gait)] if leg in gait else (leg + 1) % 4
 
     def leaves_no_support(self, state: State, leg: int, foothold_W) -> bool:
         """Whether ``leg`` on ``foothold_W`` leaves the gait's next leg no stance to swing from.
@@ -925,8 +982,7 @@ class LocalPlanner:
         margin on it (e.g. both front feet on one stepping stone: the hind legs can no
         longer step). Beyond the paper: a one-step look-ahead of the foothold choice.
         """
-        gait = list(self.settings.gait or CRAWL)
-        nxt = gait[(gait.index(leg) + 1) % len(gait)] if leg in gait else (leg + 1) % 4
+        nxt = self._next_leg(leg)
         feet = np.array(state.feet_W, float).reshape(4, 3)
         feet[leg] = np.asarray(foothold_W, float).reshape(3)
         return triangle_inradius_m(np.delete(feet, nxt, axis=0)) < BALANCE_MARGIN_M

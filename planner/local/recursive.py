@@ -15,7 +15,13 @@ cannot be made, go back as far as needed and try the earlier steps differently. 
 - the walk is planned in windows of ``lookahead`` steps (receding horizon). Each window
   has a budget of step attempts (``node_budget``), and the whole run the time budget of
   the settings, so F always returns. A window that fails within its budget commits the
-  deepest sequence of steps it found; none at all means the robot is stuck.
+  deepest sequence of steps it found; none at all means the robot is stuck;
+- a window is complete only where every leg can still shift the body onto the other three
+  (:meth:`planner.local.base.LocalPlanner.legs_can_move`, a plain Theta2 each): a
+  sequence ending in a *dead end* is traced back like a failed step. Up a 10 cm step
+  the greedy order puts three feet on top while the fourth, below, can no longer reach
+  with the COM over the other three; the window check finds the order that brings it
+  up in time (``stats.dead_ends`` counts the windows refused).
 
 Where it beats 8.2: the soft planner commits every step greedily and, when a leg then
 cannot step, only swaps legs and shortens that one leg's stride; the recursive planner
@@ -53,25 +59,35 @@ class _Window:
     best: list[Step] = field(default_factory=list)
     best_queue: tuple[int, ...] = ()
     backtracks: int = 0
+    dead_ends: int = 0
 
 
 class RecursivePlanner(LocalPlanner):
     """F(Psi, Q, n, rho) of section 8.5 in receding windows."""
 
     name = "recursive"
+    foothold_lookahead = True
 
     def __init__(self, robot, terrain, mu=None, settings=None, recursion=None):
         super().__init__(robot, terrain, mu, settings)
         self.recursion = recursion or RecursiveSettings()
-        self.extra_stats = {"backtracks": 0, "windows": 0, "partial_windows": 0}
+        self.extra_stats = {"backtracks": 0, "dead_ends": 0, "windows": 0, "partial_windows": 0}
 
     def F(self, walk: Walk, queue: tuple[int, ...], n: int, run: _Run, win: _Window, path):
         """Make ``n`` steps from ``walk.state``; returns the queue after them, or None.
 
         ``path`` holds the steps made so far in this window (for the best partial result).
         """
-        if n == 0 or self.distance_to_goal(walk.state, run) <= self.settings.goal_tol_m:
+        if self.distance_to_goal(walk.state, run) <= self.settings.goal_tol_m:
             return queue
+        if n == 0:
+            # a window ends where every leg can still shift the body onto the other three:
+            # otherwise it leads into a dead end (three feet up a step, the fourth unable
+            # to follow) and is traced back like a failed step
+            if self.legs_can_move(walk.state, queue, run.tau):
+                return queue
+            win.dead_ends += 1
+            return None
         rs = self.recursion
         for j in range(min(rs.legs_per_level, len(queue))):
             leg = queue[j]
@@ -111,6 +127,7 @@ class RecursivePlanner(LocalPlanner):
             except _Budget:
                 out = None
             self.extra_stats["backtracks"] += win.backtracks
+            self.extra_stats["dead_ends"] += win.dead_ends
             if out is not None:
                 queue = out
                 self.report(walk, run)

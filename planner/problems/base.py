@@ -44,6 +44,11 @@ CLEARANCE_ROUNDS = 4  # solves at most, each one re-picking the lowest points
 # the NLP holds a capsule this much farther than the check asks: the witness of the next
 # round is another cloud point (2 mm grid), up to ~1 mm nearer than the plane it replaces
 WITNESS_SLACK_M = 0.001
+# a swing leg's touch-down joints keep this far inside the URDF limits [rad]: at a limit the
+# leg cannot lift its foot off again along the normal (the swing's pre-pose,
+# planner.leg_swing) nor correct a tracking error; a landing onto a 10 cm step put the hip
+# roll at its -0.6 rad stop, and no swing path reached it
+LANDING_LIMIT_MARGIN_RAD = 0.1
 
 
 @dataclass
@@ -612,6 +617,13 @@ class ThetaProblem:
 
 
 # ---- shared symbolic pieces ----------------------------------------------------------------
+
+
+def landing_bounds_rad(robot, leg: int) -> tuple[np.ndarray, np.ndarray]:
+    """(lower, upper) bounds of ``leg``'s touch-down joints: ``LANDING_LIMIT_MARGIN_RAD`` in."""
+    lo, hi = np.asarray(robot.lower_rad[leg], float), np.asarray(robot.upper_rad[leg], float)
+    m = np.minimum(LANDING_LIMIT_MARGIN_RAD, 0.25 * (hi - lo))
+    return lo + m, hi - m
 
 
 def _log(sigma):

@@ -34,6 +34,7 @@ import casadi as ca
 import numpy as np
 
 from planner import stability, statics
+from planner.heuristics import frame_from_directions
 from planner.kinematics import hip_point_B
 from planner.lie import coords_from_pose
 from planner.problems.base import (
@@ -42,6 +43,7 @@ from planner.problems.base import (
     ThetaSolution,
     com_W_ca,
     gaussian_ca,
+    landing_bounds_rad,
     sigma3_ca,
     state_from_pose_coords,
 )
@@ -117,7 +119,7 @@ class Theta2(ThetaProblem):
         if self.landing:
             # landing-ready: the swing leg's joints at touch-down (from this body pose) reach
             # the target's sphere centre with thigh and shank clear of the terrain
-            th_land = self.var("theta_land", 3, r.lower_rad[leg], r.upper_rad[leg])
+            th_land = self.var("theta_land", 3, *landing_bounds_rad(r, leg))
             land_W = ca.mtimes(R, self.kin.foot_B_ca(leg, th_land)) + pos
             self.constrain("landing", land_W - target)
             self.constrain_leg_links(pos, R, {leg: th_land}, name="landing_clearance")
@@ -249,22 +251,23 @@ class Theta2(ThetaProblem):
             }
         )
 
-    def initial_guess(self, start: State, p: np.ndarray) -> np.ndarray:
+    def initial_guess(self, start: State, p: np.ndarray, turned: bool = False) -> np.ndarray:
         """Decision vector near ``start`` on its leaf, with the COM moved to r_c*.
 
         The body is translated by r_c* - COM(start) (half of it if a foot would be out of
         reach) and the legs re-solved by Paden-Kahan IK onto the same foot centres, so
         IPOPT starts on the leaf next to the optimum (9 iterations instead of 14 on the
-        benchmark); if neither fits, the start itself.
+        benchmark); if neither fits, the start itself. ``turned``: the body also turned to
+        the reference directions (u_f, u_n), the retry of :meth:`solve`.
         """
-        R = start.base_rotation_W
-        pos, joints = self._com_shifted(start, p)
         u_f = p[self._p_slices["u_f"]]
         u_n = p[self._p_slices["u_n"]]
+        R = frame_from_directions(u_f, u_n) if turned else start.base_rotation_W
+        pos, joints = self._com_shifted(start, p, R)
         floor = self.options.sigma_floor
         x = [
             pos,
-            coords_from_pose(start.pose)[3:],
+            coords_from_pose(np.column_stack([R, pos]))[3:],
             joints.ravel(),
             [max(float(u_f @ R[:, 0]), floor)],
             [max(float(u_n @ R[:, 2]), floor)],
@@ -295,13 +298,17 @@ class Theta2(ThetaProblem):
         landed.joints_rad[leg] = self.x_block(x, "theta_land")
         return landed
 
-    def _com_shifted(self, start: State, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Body position and (4, 3) joints with the COM moved toward r_c* (same feet)."""
-        shift = p[self._p_slices["rc_star"]] - self.check.com_W(start)
+    def _com_shifted(self, start: State, p: np.ndarray, R) -> tuple[np.ndarray, np.ndarray]:
+        """Body position and (4, 3) joints, body rotation ``R``, the COM moved toward r_c*.
+
+        The same feet; the start's position and joints when no shift keeps them in reach.
+        """
+        com_B = start.base_rotation_W.T @ (self.check.com_W(start) - start.base_position_W)
+        target = p[self._p_slices["rc_star"]] - R @ com_B  # the body origin at r_c*
         centres = p[self._p_slices["centres_W"]].reshape(4, 3)
-        for frac in (1.0, 0.5):
-            pos = start.base_position_W + frac * shift
-            legs = self.kin.ik(pos, start.base_rotation_W, centres, start.joints_rad)
+        for frac in (1.0, 0.5, 0.0):
+            pos = start.base_position_W + frac * (target - start.base_position_W)
+            legs = self.kin.ik(pos, R, centres, start.joints_rad)
             if all(r.reachable and not r.knee_flipped for r in legs):
                 return pos, np.array([r.joints_rad for r in legs])
         return start.base_position_W, start.joints_rad
@@ -314,6 +321,13 @@ class Theta2(ThetaProblem):
         """
         p = self.params(start, rc_star_W, u_f, u_n, swing_target_W)
         sol = self.solve_packed(p, self.initial_guess(start, p))
+        if not sol.feasible:
+            # IPOPT may stall on the far side of a leaf from its start (a 10 cm step: a
+            # feasible pose a few cm away, "Infeasible_Problem_Detected" from the start):
+            # once more from the start turned to (u_f, u_n) and moved to r_c*
+            again = self.solve_packed(p, self.initial_guess(start, p, turned=True))
+            if again.feasible or again.max_violation() < sol.max_violation():
+                sol = again
         sol.state.info["rc_star"] = np.asarray(rc_star_W, float)
         if self.landing and sol.x is not None:
             # the touch-down joints this pose was found with: Theta3's starting point, so

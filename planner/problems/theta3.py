@@ -23,6 +23,7 @@ from planner.problems.base import (
     ThetaSolution,
     contact_on_terrain_ca,
     gaussian_ca,
+    landing_bounds_rad,
     sigma3_ca,
     terrain_height_function,
 )
@@ -44,7 +45,7 @@ class Theta3(ThetaProblem):
 
     def _declare(self) -> None:
         o, r, i = self.options, self.robot, self.leg
-        th = self.var("theta", 3, r.lower_rad[i], r.upper_rad[i])
+        th = self.var("theta", 3, *landing_bounds_rad(r, i))
         pos = self.par("p", 3)
         rot = self.par("R", 9)
         target = self.par("target_W", 3)
