@@ -273,8 +273,8 @@ def test_theta2_tilt_stays_within_max_tilt_of_u_n(dog):
 
 
 def test_touchdown_joints_keep_off_their_limits(dog):
-    """Theta3 (and Theta2's landing joints) stay LANDING_LIMIT_MARGIN_RAD inside the URDF
-    limits, so the swing can lift the foot off along the normal again (its pre-pose)."""
+    """Theta3 keeps the touch-down joints LANDING_LIMIT_MARGIN_RAD inside the URDF limits
+    where it can, so the swing can lift the foot off along the normal again (its pre-pose)."""
     from planner.kinematics import kinematics_of
     from planner.problems.base import LANDING_LIMIT_MARGIN_RAD, landing_bounds_rad
 
@@ -292,6 +292,24 @@ def test_touchdown_joints_keep_off_their_limits(dog):
     up_B = kin.foot_B(leg, th) + sol.state.base_rotation_W.T @ [0.0, 0.0, 0.01]
     ik = kin.ik_leg(leg, up_B, reference_rad=th, knee=kin.knee_direction(leg, th))
     assert ik.reachable and not ik.knee_flipped
+
+
+def test_touchdown_uses_the_margin_only_where_nothing_else_lands(dog):
+    """A foothold reachable only with the hip roll past the margin (the target radius
+    holds the foot within 2.08 cm of a point 10 cm outward: 2.17 cm within the margin,
+    1.99 cm without) is still found, within the URDF limits."""
+    from planner.problems.base import landing_bounds_rad
+
+    terrain, placed, _, _ = _placed(dog, "flat", 0.3)
+    start, leg = placed.state, 1
+    target = start.feet_W[leg] + [0.0, -0.1, 0.0]
+    sol = Theta3(dog, terrain, leg=leg).solve(start, target, target_radius_m=0.0208)
+    assert sol.feasible, sol.diagnosis
+    th = sol.state.joints_rad[leg]
+    lo, _ = landing_bounds_rad(dog, leg)
+    assert th[0] < lo[0] - 1e-3  # past the margin: the margin alone finds nothing
+    assert np.all(th >= dog.lower_rad[leg] - 1e-9) and np.all(th <= dog.upper_rad[leg] + 1e-9)
+    assert np.linalg.norm(sol.state.feet_W[leg] - target) <= 0.0208 + 1e-6
 
 
 def test_theta2_retry_starts_turned_to_the_reference_directions(dog):

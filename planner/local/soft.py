@@ -15,13 +15,21 @@ One cycle moves one leg, as in figure 6 of the paper:
 
 Beyond the paper (see :meth:`planner.local.base.LocalPlanner.step`): footholds are moved
 off edges of the sharp terrain, and the body move keeps the swinging leg within reach of
-its next foothold.
+its next foothold. Where the greedy steps lead into a dead end (``RETRACE_FAILS`` failed
+attempts in a row, or ``no_progress_cycles / 2`` cycles without progress) the walk is
+traced back ``RETRACE_STEPS`` steps before its best point and those steps are planned
+again with the foothold look-ahead of the recursive planner (8.5): each foothold must leave
+the next leg a body move. Once per point reached: a dead end met again stops the planner.
 """
 
 from __future__ import annotations
 
-from planner.local.base import LocalPlan, LocalPlanner, LocalSettings, Walk, _Run
+from planner.local.base import PROGRESS_M, LocalPlan, LocalPlanner, LocalSettings, Walk, _Run
 from planner.local.gait_queue import GaitQueue
+
+RETRACE_FAILS = 4  # failed step attempts in a row that trigger a retrace
+RETRACE_STEPS = 4  # steps traced back before the best point (one crawl cycle)
+LOOKAHEAD_STEPS = 8  # steps past the dead end planned with the look-ahead
 
 
 class SoftPlanner(LocalPlanner):
@@ -29,13 +37,44 @@ class SoftPlanner(LocalPlanner):
 
     name = "soft"
 
+    def __init__(self, robot, terrain, mu=None, settings=None):
+        super().__init__(robot, terrain, mu, settings)
+        self.extra_stats = {"retraces": 0}
+
     def _run(self, walk: Walk, run: _Run) -> str:
         st = self.settings
         queue = GaitQueue(st.gait)
         step_scale = {i: 1.0 for i in range(4)}
         fails_in_row = 0
+        # before each committed step: (walk mark, queue, run cycle)
+        history: list[tuple[tuple, tuple, int]] = []
+        retrace_dist = float("inf")  # the best distance to the goal at the last retrace
+        lookahead_until = -1  # walk steps up to which footholds are looked ahead
         while not (message := self.stop_reason(walk, run, fails_in_row)):
+            stalled = run.cycles - run.best_at >= st.no_progress_cycles // 2
+            if (
+                (fails_in_row >= RETRACE_FAILS or stalled)
+                and history
+                and run.best_dist_m < retrace_dist - PROGRESS_M
+            ):
+                # a dead end: back to RETRACE_STEPS steps before the best point, and plan
+                # from there with the look-ahead (8.5's tracing back, one level)
+                retrace_dist = run.best_dist_m
+                lookahead_until = walk.steps + LOOKAHEAD_STEPS
+                at_best = max(k for k, h in enumerate(history) if h[2] <= run.best_at or k == 0)
+                k = max(at_best - RETRACE_STEPS, 0)
+                mark, legs, _ = history[k]
+                del history[k:]
+                walk.rewind(mark)
+                queue = GaitQueue(legs)
+                step_scale = {i: 1.0 for i in range(4)}
+                fails_in_row = 0
+                run.best_at = run.cycles
+                self.extra_stats["retraces"] += 1
+            self.foothold_lookahead = walk.steps < lookahead_until
             run.cycles += 1
+            mark = walk.mark()
+            before = tuple(queue)
             leg = queue.pop()
             step = self.step(walk.state, leg, run.tau, self.stride_m() * step_scale[leg])
             walk.add(step)  # a failed placement keeps its body move
@@ -46,10 +85,12 @@ class SoftPlanner(LocalPlanner):
                 fails_in_row += 1
                 queue.swap(leg, fails_in_row)
                 continue
+            history.append((mark, before, run.cycles))
             step_scale[leg] = 1.0
             fails_in_row = 0
             queue.push(leg)
             self.report(walk, run)
+        self.foothold_lookahead = False
         return message
 
 
