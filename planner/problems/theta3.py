@@ -15,7 +15,8 @@ Beyond the paper: the touch-down joints are first sought ``LANDING_LIMIT_MARGIN_
 inside the URDF limits (:func:`~planner.problems.base.landing_bounds_rad`; a foot landed
 with a joint at its stop may not lift off again along the normal), and within the full
 limits only where no such landing exists (a stone reached sideways with the hip roll at
-its stop: the margin alone stalled 7 of 32 generated courses).
+its stop: with the margin alone soft stalled on generated stones, gen:1, that it walks
+without it).
 """
 
 from __future__ import annotations
@@ -110,10 +111,17 @@ class Theta3(ThetaProblem):
         return sol
 
     def _solve_within(self, p: np.ndarray, x0: np.ndarray, bounds_rad) -> ThetaSolution:
-        """:meth:`solve_packed` with the swing leg's joints within ``bounds_rad`` (lo, hi)."""
+        """:meth:`solve_packed` with the swing leg's joints within ``bounds_rad`` (lo, hi).
+
+        The problem's own bounds (the URDF limits) are restored afterwards.
+        """
         sl = self._x_slices["theta"]
+        kept = self.lbx[sl].copy(), self.ubx[sl].copy()
         self.lbx[sl], self.ubx[sl] = bounds_rad
-        return self.solve_packed(p, x0)
+        try:
+            return self.solve_packed(p, x0)
+        finally:
+            self.lbx[sl], self.ubx[sl] = kept
 
     def initial_guess(self, state: State, target_W=None) -> np.ndarray:
         """Decision vector: IK of the foot on ``target_W`` when reachable, else ``state``'s.
