@@ -278,7 +278,9 @@ def test_plan_step_cycles_hold_each_planned_swing(short_plan):
 
 def test_feedback_falls_back_on_the_plans_step_corrected(short_plan, monkeypatch):
     """No body move from the measured state reaches the plan's foothold: the plan's own step,
-    corrected from the measurement (8.4), carries the walk on, landing on that foothold."""
+    corrected from the measurement (8.4), carries the walk on, landing on that foothold;
+    where the corrected step keeps less than 25 mm of balance margin (short_plan's second
+    step lifts with 24 mm) it is refused and the step is planned anew."""
     from planner.local.base import LocalPlanner
 
     real = LocalPlanner.step
@@ -291,12 +293,15 @@ def test_feedback_falls_back_on_the_plans_step_corrected(short_plan, monkeypatch
         return out
 
     monkeypatch.setattr(LocalPlanner, "step", step)
-    res = run_feedback(short_plan, max_cycles=3)
+    res = run_feedback(short_plan, max_cycles=4)
     m, fb = res.metrics, res.executed.stats["feedback"]
-    assert fb["plan_steps_corrected"] == fb["steps"] == 3 and m.ik_misses == 0, m.summary()
+    assert fb["steps"] == 4 and m.ik_misses == 0, m.summary()
+    corrected = [f["cycle"] - 1 for f in fb["planner_failures"] if "corrected" in f["why"]]
+    assert fb["plan_steps_corrected"] == len(corrected) == 3 and 1 not in corrected
     assert not (m.fell or m.tipped), m.summary()
     kfs = res.executed.keyframes  # measured at the start of each cycle
-    for k, (leg, foot) in enumerate(planned_steps(short_plan)[:2]):
+    for k in corrected[:2]:
+        leg, foot = planned_steps(short_plan)[k]
         landed = kfs[k + 1].feet[leg]
         assert np.linalg.norm(landed[:2] - foot[:2]) < 0.015, (k, landed, foot)
 
@@ -322,7 +327,7 @@ def test_a_corrected_plan_step_that_fails_a_gate_is_not_executed(short_plan, mon
     from planner.simulate import new_run
 
     if gate == "balance":  # no support triangle holds the COM 1 m inside it
-        monkeypatch.setattr(planner.stability, "PATH_BALANCE_MARGIN_M", 1.0)
+        monkeypatch.setattr(planner.stability, "BALANCE_MARGIN_M", 1.0)
     else:  # after the first sample every link 1 m inside the terrain
         real = planner.links.LegLinks.path_margin
         calls = []
