@@ -74,8 +74,15 @@ TIME_BUDGET_S = 240.0
 
 
 def expand_courses(names) -> tuple[str, ...]:
-    """Course names with the groups 'named' (:data:`COURSES`), 'hard', 'global' spelled out."""
+    """Course names with the groups spelled out.
+
+    'named' (:data:`COURSES`), 'hard', 'global' and 'ladder'
+    (:func:`planner.course_gen.ladder_course_names`).
+    """
+    from planner.course_gen import ladder_course_names
+
     groups = {"named": COURSES, "hard": HARD_COURSES, "global": GLOBAL_COURSES}
+    groups["ladder"] = tuple(ladder_course_names())
     return tuple(dict.fromkeys(c for n in names for c in groups.get(n, (n,))))
 
 

@@ -104,9 +104,8 @@ def physics_jobs(
     """
     from planner.course_gen import (
         course_goal_xy,
-        generate_course,
+        course_spec,
         generated_course_names,
-        parse_course_name,
         write_course,
     )
 
@@ -114,13 +113,13 @@ def physics_jobs(
     names = list(dict.fromkeys([*courses, *gen]))
     jobs = []
     for name in names:
-        parsed = parse_course_name(name)
-        if parsed is None:
+        spec = course_spec(name)
+        if spec is None:
             terrain, goal, group = name, goal_for(name, named_goal_xy), "named"
         else:
-            spec = generate_course(parsed[0], parsed[2], parsed[1])
             terrain = str(write_course(spec, Path(out_dir) / "courses").resolve())
-            goal, group = course_goal_xy(spec), "generated"
+            goal = course_goal_xy(spec)
+            group = "ladder" if name.startswith("feat:") else "generated"
         jobs.append(
             {
                 "robot": "littledog",
@@ -295,7 +294,7 @@ def summarize(rows: Sequence[dict]) -> dict[str, Any]:
     modes = list(dict.fromkeys(r["mode"] for r in rows))
     named = [r for r in rows if r.get("group") == "named"]
     gen = [r for r in rows if r.get("group") == "generated"]
-    out: dict[str, Any] = {"named": {}, "generated": {}}
+    out: dict[str, Any] = {"named": {}, "generated": {}, "ladder": ladder_limits(rows)}
     for mode in modes:
         rs = [r for r in named if r["mode"] == mode]
         if rs:
@@ -313,6 +312,56 @@ def summarize(rows: Sequence[dict]) -> dict[str, Any]:
                 "fraction": k / len(rs) if rs else None,
             }
     return out
+
+
+def ladder_limits(rows: Sequence[dict]) -> dict[str, Any]:
+    """Where the planner's limits are, from the feature ladder's rows.
+
+    Per ladder family: each size's results, and the largest size planned (the plan reached
+    and passes the check) and reached in each mode. Families are the kinds of
+    :data:`planner.course_gen.LADDER`, steps and stairs split into up and down; sizes are
+    magnitudes in the ladder's units.
+    """
+    from planner.course_gen import LADDER_UNITS
+
+    out: dict[str, Any] = {}
+    for r in rows:
+        if r.get("group") != "ladder":
+            continue
+        _, kind, text = r["course"].split(":")
+        size = float(text)
+        family = f"{kind} {'up' if size > 0 else 'down'}" if kind in ("step", "stairs") else kind
+        entry = out.setdefault(family, {"unit": LADDER_UNITS.get(kind, ""), "sizes": {}})
+        cell = entry["sizes"].setdefault(abs(size), {"planned": bool(r.get("planned"))})
+        cell[r["mode"]] = bool(r.get("success"))
+    for entry in out.values():
+        sizes = sorted(entry["sizes"])
+        modes = {m for c in entry["sizes"].values() for m in c if m != "planned"}
+        entry["largest"] = {
+            what: max((v for v in sizes if entry["sizes"][v].get(what)), default=None)
+            for what in ["planned", *sorted(modes)]
+        }
+        entry["sizes"] = {f"{v:g}": entry["sizes"][v] for v in sizes}
+    return out
+
+
+def _ladder_lines(limits: dict[str, Any], modes: Sequence[str]) -> list[str]:
+    names = ["planned", *modes]
+    lines = [
+        "| feature | unit | sizes: planned / "
+        + " / ".join(MODE_NAMES.get(m, m) for m in modes)
+        + " | largest planned | "
+        + " | ".join(f"largest, {MODE_NAMES.get(m, m)}" for m in modes)
+        + " |",
+        "|---|---|---|---:|" + "---:|" * len(modes),
+    ]
+    for family, e in limits.items():
+        cells = ", ".join(
+            f"{v}: " + "/".join(_yn(c.get(n)) for n in names) for v, c in e["sizes"].items()
+        )
+        big = [_f(e["largest"].get(n), "g") for n in names]
+        lines.append(f"| {family} | {e['unit']} | {cells} | " + " | ".join(big) + " |")
+    return lines
 
 
 def _f(v: Any, fmt: str) -> str:
@@ -395,11 +444,27 @@ def render_markdown(result: dict[str, Any]) -> str:
         "wall = simulation wall time.",
         "",
     ]
-    groups = {"named": "Named courses", "generated": "Generated courses"}
+    groups = {
+        "named": "Named courses",
+        "generated": "Generated courses",
+        "ladder": "Feature ladder",
+    }
     for group, title in groups.items():
         rows = [r for r in result["rows"] if r.get("group") == group]
         if rows:
             lines += [f"## {title}", "", *_table(rows), ""]
+    limits = result["summary"].get("ladder")
+    if limits:
+        lines += [
+            "## Limits (feature ladder)",
+            "",
+            "One feature per course (`feat:KIND:SIZE`, `planner/course_gen.py`): each size's "
+            "results (yes/no: planned, then each mode reached without a fall) and the largest "
+            "size of each.",
+            "",
+            *_ladder_lines(limits, c["modes"]),
+            "",
+        ]
     lines += ["## Summary", "", *_summary_lines(result["summary"]), ""]
     return "\n".join(lines)
 
@@ -536,7 +601,8 @@ def add_physics_parser(bench_sub) -> argparse.ArgumentParser:
     p.add_argument(
         "--courses",
         default="named",
-        help="comma-separated terrains; 'named' = the 9 first courses, 'hard' = issue 15's 8",
+        help="comma-separated terrains; 'named' = the 9 first courses, 'hard' = issue 15's 8, "
+        "'ladder' = the feature ladder (feat:KIND:SIZE, planner.course_gen.LADDER)",
     )
     p.add_argument("--generated", type=int, default=GENERATED, help="generated courses")
     p.add_argument("--first-seed", type=int, default=0, help="seed of the first generated course")
@@ -566,7 +632,7 @@ def cmd_physics(args) -> int:
     from planner.outputs import check_folder
 
     check_folder(args.out, "--out")
-    from planner.course_gen import parse_course_name
+    from planner.course_gen import course_spec
 
     courses = expand_courses(_names(args.courses))
     modes = _names(args.modes)
@@ -582,7 +648,7 @@ def cmd_physics(args) -> int:
     if not courses and args.generated == 0:
         raise InputError("--courses: give at least one course, or --generated N")
     for name in courses:
-        parse_course_name(name)  # a malformed gen:... name fails here, not in a job
+        course_spec(name)  # a malformed gen:/feat: name fails here, not in a job
     if not 0.0 <= args.difficulty <= 1.0:
         raise InputError(f"--difficulty: must be in [0, 1], got {args.difficulty}")
     if not args.time_budget > 0:

@@ -168,7 +168,7 @@ def _cmd_plan(args) -> int:
             shown = ",".join(value) if isinstance(value, list) else f"{value:g}"
             print(f"{name}: {shown}")
         return 0
-    if args.goal is None and str(terrain.name).startswith("gen:"):
+    if args.goal is None and str(terrain.name).startswith(("gen:", "feat:")):
         from planner.course_gen import course_goal_xy
 
         goal = course_goal_xy(terrain.spec)  # a generated course: walk to its end

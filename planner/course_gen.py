@@ -27,6 +27,18 @@ easy + d * u * (maximum - easy), u ~ U(0.6, 1) (``_SIZES``). Every course keeps 
 A generated course is named ``gen:SEED`` (difficulty 1, length 3 m) or
 ``gen:SEED:DIFFICULTY[:LENGTH]``; :func:`write_course` writes it as YAML, which
 ``stratawalk plan --terrain`` and batch jobs accept as a path.
+
+Issue 15's kinds, ``incline`` (a ramp up or down, up to ``MAX_INCLINE_DEG``) and
+``barrier`` (a wall to step over, up to ``MAX_BARRIER_M`` high), are drawn only when asked
+for (``kinds``, ``stratawalk generate-course --kinds``): the default deck stays the five
+above, so that ``gen:SEED`` names the same course as in the physics benchmarks.
+
+The feature ladder (issue 15): :func:`feature_course` makes a course with one feature of
+a given size (``feat:KIND:SIZE``, e.g. ``feat:step:0.1``, ``feat:gap:0.12``,
+``feat:incline:18``): flat to x = 0.6 m, the feature, flat after it, the goal 0.35-0.45 m
+past its last edge (:func:`course_goal_xy`). :data:`LADDER` lists the sizes of the limits
+table (``stratawalk bench physics --courses ladder``): the largest step, trench, incline,
+barrier, stair rise and stone gap the planner reaches.
 """
 
 from __future__ import annotations
@@ -45,15 +57,22 @@ __all__ = [
     "FEATURE_KINDS",
     "add_generate_parser",
     "cmd_generate",
+    "EXTRA_KINDS",
+    "LADDER",
     "course_goal_xy",
     "course_name",
+    "course_spec",
+    "feature_course",
+    "feature_course_name",
+    "ladder_course_names",
     "generate_course",
     "generated_course_names",
     "parse_course_name",
     "write_course",
 ]
 
-FEATURE_KINDS = ("rough", "step", "gap", "stairs", "stepping_stones")
+FEATURE_KINDS = ("rough", "step", "gap", "stairs", "stepping_stones")  # the default deck
+EXTRA_KINDS = ("incline", "barrier")  # issue 15's, drawn when asked for
 FRICTION = 0.7
 X_MIN_M = -0.5
 Y_MIN_M, Y_MAX_M = -0.6, 0.6
@@ -65,8 +84,11 @@ MAX_RELIEF_M = 0.06
 MAX_STEP_M = 0.08
 MAX_GAP_WIDTH_M = 0.08
 MAX_STAIR_RISE_M = 0.06
+MAX_INCLINE_DEG = 18.0
+MAX_BARRIER_M = 0.09
 MAX_LEVEL_M = 0.2  # |ground level| stays below this
 _MIN_FEATURE_M = 0.45  # the shortest feature segment (step, gap)
+MAX_MISFITS = 100_000  # draws in a row that do not fit (~2 s): the kinds are too long, stop
 _PREFIX = "gen"
 
 # (easy, hardest) of each size; difficulty d picks easy + d * u * (hardest - easy), u ~ U(0.6, 1)
@@ -82,6 +104,8 @@ _SIZES = {
     "stone_size_m": (0.14, 0.09),
     "stone_gap_m": (0.02, 0.05),
     "stone_jitter_m": (0.0, 0.02),
+    "incline_deg": (4.0, MAX_INCLINE_DEG),
+    "barrier_m": (0.02, MAX_BARRIER_M),
 }
 
 
@@ -176,7 +200,37 @@ def _feature(kind: str, rng: np.random.Generator, d: float, level_m: float) -> d
             "depth": _r(_size(rng, "drop_m", d) - jitter),  # pit floor to the highest top
             "seed": _seed(rng),
         }
-    raise InputError(f"feature kind: unknown '{kind}'; use one of {', '.join(FEATURE_KINDS)}")
+    if kind == "incline":  # a ramp of 0.25-0.4 m, up or down
+        ramp = rng.uniform(0.25, 0.4)
+        grade = math.tan(math.radians(_size(rng, "incline_deg", d)))
+        rise = _signed(rng, level_m, grade * ramp)
+        return _incline(math.degrees(math.atan(rise / ramp)), ramp)
+    if kind == "barrier":
+        return _barrier(_size(rng, "barrier_m", d), length_m=rng.uniform(0.45, 0.6))
+    kinds = ", ".join(FEATURE_KINDS + EXTRA_KINDS)
+    raise InputError(f"feature kind: unknown '{kind}'; use one of {kinds}")
+
+
+def _incline(angle_deg: float, ramp_m: float) -> dict[str, Any]:
+    """A ramp of ``ramp_m`` along x at ``angle_deg`` (< 0 down) from 0.15 m, 0.3 m flat after."""
+    return {
+        "kind": "slope",
+        "length": _r(0.15 + ramp_m + 0.3),
+        "angle_deg": _r(angle_deg),
+        "start": 0.15,
+        "ramp_length": _r(ramp_m),
+    }
+
+
+def _barrier(height_m: float, thickness_m: float = 0.03, length_m: float = 0.5) -> dict:
+    """A wall ``height_m`` high and ``thickness_m`` thick across the path, from 0.15 m."""
+    return {
+        "kind": "barrier",
+        "length": _r(length_m),
+        "x": 0.15,
+        "height": _r(height_m),
+        "thickness": _r(thickness_m),
+    }
 
 
 def _level_change(seg: dict[str, Any]) -> float:
@@ -184,7 +238,21 @@ def _level_change(seg: dict[str, Any]) -> float:
         return seg["height"]
     if seg["kind"] == "stairs":
         return seg["rise"] * seg["count"]
+    if seg["kind"] == "slope":
+        return math.tan(math.radians(seg["angle_deg"])) * seg["ramp_length"]
     return 0.0
+
+
+def _check_kinds(kinds) -> tuple[str, ...]:
+    known = FEATURE_KINDS + EXTRA_KINDS
+    out = tuple(dict.fromkeys(str(k).strip() for k in kinds))
+    bad = [k for k in out if k not in known]
+    if bad or not out:
+        raise InputError(
+            f"--kinds: unknown feature kind {bad[0] if bad else '(none)'!r}; "
+            f"use some of {','.join(known)}"
+        )
+    return out
 
 
 def _check_args(seed: Any, length_m: float, difficulty: float) -> None:
@@ -198,7 +266,12 @@ def _check_args(seed: Any, length_m: float, difficulty: float) -> None:
         raise InputError(f"--length: must be >= {MIN_LENGTH_M} m, got {length_m}")
 
 
-def generate_course(seed: int, length_m: float = DEFAULT_LENGTH_M, difficulty: float = 1.0) -> dict:
+def generate_course(
+    seed: int,
+    length_m: float = DEFAULT_LENGTH_M,
+    difficulty: float = 1.0,
+    kinds: tuple[str, ...] = FEATURE_KINDS,
+) -> dict:
     """A random course spec (kind ``course``), the same for the same arguments.
 
     Parameters
@@ -210,6 +283,9 @@ def generate_course(seed: int, length_m: float = DEFAULT_LENGTH_M, difficulty: f
         walk over the course); features start at x = 0.6 m. At least 1 m.
     difficulty
         In [0, 1]: 0 gives the easy sizes, 1 up to the maxima (module docstring).
+    kinds
+        The feature kinds of the deck: some of ``FEATURE_KINDS + EXTRA_KINDS``. Other
+        than the default, the course's name gets them (``gen:SEED:D:L:KIND+KIND``).
 
     Returns
     -------
@@ -224,16 +300,19 @@ def generate_course(seed: int, length_m: float = DEFAULT_LENGTH_M, difficulty: f
 
     """
     _check_args(seed, length_m, difficulty)
+    kinds = _check_kinds(kinds)
     rng = np.random.default_rng(int(seed))
     d = float(difficulty)
     segments: list[dict[str, Any]] = [{"kind": "flat", "length": FLAT_START_END_M - X_MIN_M}]
-    x, level, deck, placed = FLAT_START_END_M, 0.0, [], []
-    while x + _MIN_FEATURE_M <= length_m + 1e-9:
+    x, level, deck, placed, misfits = FLAT_START_END_M, 0.0, [], [], 0
+    while x + _MIN_FEATURE_M <= length_m + 1e-9 and misfits < MAX_MISFITS:
         if not deck:
-            deck = [str(k) for k in rng.permutation(FEATURE_KINDS)]
+            deck = [str(k) for k in rng.permutation(kinds)]
         seg = _feature(deck.pop(0), rng, d, level)
         if x + seg["length"] > length_m + 1e-9:
+            misfits += 1
             continue  # does not fit in what is left: try the next kind
+        misfits = 0
         segments.append(seg)
         placed.append(seg["kind"])
         x += seg["length"]
@@ -241,7 +320,7 @@ def generate_course(seed: int, length_m: float = DEFAULT_LENGTH_M, difficulty: f
     segments.append({"kind": "flat", "length": round(length_m - x + FLAT_END_M, 4)})
     total = sum(s["length"] for s in segments)
     return {
-        "name": course_name(seed, difficulty, length_m),
+        "name": course_name(seed, difficulty, length_m, kinds),
         "description": (
             f"Generated course (planner.course_gen), seed {seed}, difficulty {d:g}: flat to "
             f"x = {FLAT_START_END_M} m, then {', '.join(placed) or 'nothing'}, flat from "
@@ -263,8 +342,18 @@ def course_goal_xy(spec: dict) -> tuple[float, float]:
 
 
 # ------------------------------------------------------------------------------ names
-def course_name(seed: int, difficulty: float = 1.0, length_m: float = DEFAULT_LENGTH_M) -> str:
-    """``gen:SEED`` at the defaults, else ``gen:SEED:DIFFICULTY`` or ``...:LENGTH``."""
+def course_name(
+    seed: int,
+    difficulty: float = 1.0,
+    length_m: float = DEFAULT_LENGTH_M,
+    kinds: tuple[str, ...] = FEATURE_KINDS,
+) -> str:
+    """``gen:SEED`` at the defaults, else ``gen:SEED:DIFFICULTY``, ``...:LENGTH``, ``...:KINDS``.
+
+    KINDS (other than the default deck) joined by ``+``: ``gen:3:1:3:step+incline``.
+    """
+    if tuple(kinds) != FEATURE_KINDS:
+        return f"{_PREFIX}:{seed}:{difficulty:g}:{length_m:g}:{'+'.join(kinds)}"
     if length_m != DEFAULT_LENGTH_M:
         return f"{_PREFIX}:{seed}:{difficulty:g}:{length_m:g}"
     if difficulty != 1.0:
@@ -277,33 +366,142 @@ def generated_course_names(n: int, seed0: int = 0, difficulty: float = 1.0) -> l
     return [course_name(s, difficulty) for s in range(seed0, seed0 + n)]
 
 
-def parse_course_name(name: str) -> tuple[int, float, float] | None:
-    """(seed, difficulty, length_m) of ``gen:SEED[:DIFFICULTY[:LENGTH]]``; None if not one.
+def parse_course_name(name: str) -> tuple[int, float, float, tuple[str, ...]] | None:
+    """(seed, difficulty, length_m, kinds) of ``gen:SEED[:DIFFICULTY[:LENGTH[:KINDS]]]``.
+
+    None if ``name`` is not a ``gen:`` name.
 
     Raises
     ------
     InputError
-        A ``gen:`` name whose numbers are malformed.
+        A ``gen:`` name whose numbers or kinds are malformed.
 
     """
     parts = str(name).split(":")
     if parts[0] != _PREFIX or len(parts) < 2:
         return None
-    if len(parts) > 4:
-        raise InputError(f"course '{name}': expected gen:SEED[:DIFFICULTY[:LENGTH]]")
+    form = "gen:SEED[:DIFFICULTY[:LENGTH[:KIND+KIND...]]]"
+    if len(parts) > 5:
+        raise InputError(f"course '{name}': expected {form}")
     try:
         seed = int(parts[1])
         difficulty = float(parts[2]) if len(parts) > 2 else 1.0
         length_m = float(parts[3]) if len(parts) > 3 else DEFAULT_LENGTH_M
     except ValueError:
-        raise InputError(
-            f"course '{name}': expected gen:SEED[:DIFFICULTY[:LENGTH]] with numbers"
-        ) from None
+        raise InputError(f"course '{name}': expected {form} with numbers") from None
     try:
         _check_args(seed, length_m, difficulty)
+        kinds = _check_kinds(parts[4].split("+")) if len(parts) > 4 else FEATURE_KINDS
     except InputError as exc:  # name the course, not the generate-course option
         raise InputError(f"course '{name}': {exc}".replace("--", "")) from None
-    return seed, difficulty, length_m
+    return seed, difficulty, length_m, kinds
+
+
+# ------------------------------------------------------------------------------ the ladder
+# the sizes of the limits table: steps [m] (< 0 down), trench widths [m] (8 cm deep),
+# inclines [deg] (up), barrier heights [m], stair rises [m] (3 steps of 20 cm; < 0 down),
+# gaps between 8 cm stepping stones [m] (the pit 8 cm deep)
+LADDER = {
+    "step": (0.06, 0.08, 0.1, 0.12, -0.06, -0.08, -0.1, -0.12),
+    "gap": (0.04, 0.08, 0.12, 0.16),
+    "incline": (6.0, 12.0, 18.0, 24.0),
+    "barrier": (0.03, 0.06, 0.09, 0.12),
+    "stairs": (0.04, 0.06, 0.08, -0.04, -0.06, -0.08),
+    "stones": (0.03, 0.05, 0.07),
+}
+LADDER_UNITS = {"step": "m", "gap": "m", "incline": "deg", "barrier": "m", "stairs": "m",
+                "stones": "m"}  # fmt: skip
+_FEAT = "feat"
+
+
+def feature_course(kind: str, size: float) -> dict:
+    """A course with one feature of ``kind`` and ``size`` (:data:`LADDER`'s units).
+
+    Flat from x_min to 0.6 m, the feature's segment, 0.4 m of flat after it; the walk's goal
+    (:func:`course_goal_xy`) is the end of the feature's segment, 0.25-0.35 m past its last
+    edge, so every foot has crossed it.
+    """
+    size = float(size)
+    if kind not in LADDER:
+        raise InputError(f"feature course: unknown kind '{kind}'; use one of {', '.join(LADDER)}")
+    if not math.isfinite(size) or size == 0.0 or (kind not in ("step", "stairs") and size < 0):
+        raise InputError(
+            f"feature course '{kind}': size must be a number > 0 (< 0: down, for step and "
+            f"stairs), got {size!r}"
+        )
+    if kind == "step":
+        seg = {"kind": "step", "length": 0.5, "x": 0.15, "height": _r(size)}
+    elif kind == "gap":
+        seg = {"kind": "gap", "length": _r(0.45 + size), "x_start": 0.15, "width": _r(size),
+               "depth": 0.08}  # fmt: skip
+    elif kind == "incline":
+        seg = _incline(size, 0.4)
+    elif kind == "barrier":
+        seg = _barrier(size)
+    elif kind == "stairs":
+        seg = {"kind": "stairs", "length": 1.0, "x_start": 0.15, "rise": _r(size), "run": 0.2,
+               "count": 3}  # fmt: skip
+    else:
+        pit = _r(4 * (0.08 + size) + size + 0.001)
+        seg = {"kind": "stepping_stones", "length": _r(pit + 0.45), "x_start": 0.15,
+               "x_end": _r(0.15 + pit), "y_start": Y_MIN_M, "y_end": Y_MAX_M, "size": 0.08,
+               "gap": _r(size), "height": 0.0, "height_jitter": 0.0, "depth": 0.08,
+               "seed": 0}  # fmt: skip
+    segments = [{"kind": "flat", "length": FLAT_START_END_M - X_MIN_M}, seg]
+    segments.append({"kind": "flat", "length": FLAT_END_M})
+    total = sum(s["length"] for s in segments)
+    name = feature_course_name(kind, size)
+    return {
+        "name": name,
+        "description": f"Feature ladder (planner.course_gen): one {kind} of size {size:g} "
+        f"{LADDER_UNITS[kind]} from x = {FLAT_START_END_M + 0.15:g} m.",
+        "friction": FRICTION,
+        "x_min": X_MIN_M,
+        "y_min": Y_MIN_M,
+        "y_max": Y_MAX_M,
+        "kind": "course",
+        "segments": segments,
+        "length": round(total, 6),
+    }
+
+
+def feature_course_name(kind: str, size: float) -> str:
+    """``feat:KIND:SIZE``."""
+    return f"{_FEAT}:{kind}:{float(size):g}"
+
+
+def ladder_course_names() -> list[str]:
+    """The names of the limits table's courses, :data:`LADDER` in order."""
+    return [feature_course_name(k, v) for k, sizes in LADDER.items() for v in sizes]
+
+
+def course_spec(name: str) -> dict | None:
+    """The spec of a ``gen:...`` or ``feat:KIND:SIZE`` name; None for any other name.
+
+    Raises
+    ------
+    InputError
+        A malformed ``gen:`` or ``feat:`` name.
+
+    """
+    text = str(name)
+    if text.startswith(_FEAT + ":"):
+        parts = text.split(":")
+        try:
+            if len(parts) != 3:
+                raise ValueError
+            return feature_course(parts[1], float(parts[2]))
+        except (ValueError, InputError) as exc:
+            hint = f": {exc}" if isinstance(exc, InputError) else ""
+            raise InputError(
+                f"course '{name}': expected feat:KIND:SIZE (KIND one of {', '.join(LADDER)}, "
+                f"SIZE a number){hint}"
+            ) from None
+    parsed = parse_course_name(text)
+    if parsed is None:
+        return None
+    seed, difficulty, length_m, kinds = parsed
+    return generate_course(seed, length_m, difficulty, kinds)
 
 
 def write_course(spec_or_name: dict | str, path: str | Path) -> Path:
@@ -314,10 +512,11 @@ def write_course(spec_or_name: dict | str, path: str | Path) -> Path:
     """
     spec = spec_or_name
     if isinstance(spec_or_name, str):
-        parsed = parse_course_name(spec_or_name)
-        if parsed is None:
-            raise InputError(f"course '{spec_or_name}': not a generated course name (gen:SEED)")
-        spec = generate_course(parsed[0], parsed[2], parsed[1])
+        spec = course_spec(spec_or_name)
+        if spec is None:
+            raise InputError(
+                f"course '{spec_or_name}': not a generated course name (gen:SEED, feat:KIND:SIZE)"
+            )
     from planner.outputs import check_file, check_folder, write_atomic
 
     out = Path(path)
@@ -329,15 +528,21 @@ def write_course(spec_or_name: dict | str, path: str | Path) -> Path:
 
 # ------------------------------------------------------------------------------ command line
 def add_generate_parser(subparsers) -> argparse.ArgumentParser:
-    """Add ``generate-course --seed S [--difficulty D] [--length L] --out course.yaml``."""
+    """Add ``generate-course --seed S [--difficulty D] [--length L] [--kinds K,K] --out F``."""
     g = subparsers.add_parser(
         "generate-course", help="write a seeded random course (steps, gaps, stairs, ...) as YAML"
     )
-    g.add_argument("--seed", type=int, required=True, help="random seed (integer >= 0)")
+    g.add_argument("--seed", type=int, default=0, help="random seed (integer >= 0)")
     g.add_argument("--difficulty", type=float, default=1.0, help="0 (easy) .. 1 (maxima)")
     g.add_argument(
         "--length", type=float, default=DEFAULT_LENGTH_M, help="[m] x where the features end"
     )
+    g.add_argument(
+        "--kinds",
+        default=",".join(FEATURE_KINDS),
+        help=f"feature kinds drawn, comma-separated, of {','.join(FEATURE_KINDS + EXTRA_KINDS)}",
+    )
+    g.add_argument("--feature", help="instead: one feature, KIND:SIZE (feat:KIND:SIZE, LADDER)")
     g.add_argument("--out", required=True, help="YAML file (or an existing folder)")
     g.add_argument("--png", help="also draw a top view to this PNG")
     g.set_defaults(func=cmd_generate)
@@ -348,7 +553,12 @@ def cmd_generate(args) -> int:
     """Run ``stratawalk generate-course``: write the spec, check that it loads."""
     from planner.terrain import load_terrain
 
-    path = write_course(generate_course(args.seed, args.length, args.difficulty), args.out)
+    if args.feature:
+        spec = course_spec(f"{_FEAT}:{args.feature}")
+    else:
+        kinds = _check_kinds(k for k in args.kinds.split(",") if k.strip())
+        spec = generate_course(args.seed, args.length, args.difficulty, kinds)
+    path = write_course(spec, args.out)
     terrain = load_terrain(path)
     kinds = [s["kind"] for s in terrain.spec["segments"][1:-1]]
     print(

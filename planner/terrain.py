@@ -1308,8 +1308,9 @@ def _display(path: Path) -> str:
 def load_terrain(name_or_path: str | Path) -> Terrain:
     """Load a terrain by name (``terrains/NAME.yaml``), generated name or YAML path.
 
-    A generated course's name ``gen:SEED[:DIFFICULTY[:LENGTH]]``
-    (:mod:`planner.course_gen`) is drawn anew: the same name gives the same terrain.
+    A generated course's name ``gen:SEED[:DIFFICULTY[:LENGTH[:KINDS]]]`` or a feature
+    ladder's ``feat:KIND:SIZE`` (:mod:`planner.course_gen`) is drawn anew: the same name
+    gives the same terrain.
 
     Raises
     ------
@@ -1320,11 +1321,10 @@ def load_terrain(name_or_path: str | Path) -> Terrain:
 
     """
     text = str(name_or_path)
-    if not isinstance(name_or_path, Path) and text.startswith("gen:"):
-        from planner.course_gen import generate_course, parse_course_name
+    if not isinstance(name_or_path, Path) and text.startswith(("gen:", "feat:")):
+        from planner.course_gen import course_spec
 
-        seed, difficulty, length_m = parse_course_name(text)
-        return Terrain.from_spec(generate_course(seed, length_m, difficulty), source=text)
+        return Terrain.from_spec(course_spec(text), source=text)
     is_path = (
         isinstance(name_or_path, Path)
         or text.endswith((".yaml", ".yml"))

@@ -2,8 +2,10 @@ import json
 
 import pytest
 
+from planner.bench_courses import expand_courses
 from planner.bench_physics import (
     job_id,
+    ladder_limits,
     physics_jobs,
     physics_rows,
     render_markdown,
@@ -12,6 +14,7 @@ from planner.bench_physics import (
     summarize,
 )
 from planner.cli import main
+from planner.course_gen import ladder_course_names
 from planner.terrain import load_terrain
 
 
@@ -141,6 +144,42 @@ def test_markdown_has_a_table_per_group_and_the_summary(hand_made):
     assert "open loop: 1 of 2 (50 %)" in md
 
 
+def test_ladder_limits_are_the_largest_sizes_reached():
+    """The limits table: per family (steps split up and down), each size's results and the
+    largest size planned and reached in each mode; a gap in the ladder does not hide a
+    larger size that was reached."""
+    jobs = [_job(c, "ladder") for c in ("feat:step:0.06", "feat:step:0.1", "feat:step:0.08",
+                                         "feat:step:-0.06", "feat:gap:0.04")]  # fmt: skip
+    recs = [
+        _record(jobs[0], True, _sim(True), _sim(True)),
+        _record(jobs[1], True, _sim(True), _sim(False, fell=True)),
+        _record(jobs[2], False, _sim(True), _sim(True)),  # not planned
+        _record(jobs[3], True, _sim(False, fell=True), _sim(True)),
+        _record(jobs[4], False, _sim(False), _sim(False)),
+    ]
+    rows = physics_rows(jobs, {r["id"]: r for r in recs})
+    limits = ladder_limits(rows)
+    assert set(limits) == {"step up", "step down", "gap"}
+    up = limits["step up"]
+    assert list(up["sizes"]) == ["0.06", "0.08", "0.1"] and up["unit"] == "m"
+    assert up["sizes"]["0.08"] == {"planned": False, "open": False, "feedback": True}
+    assert up["largest"] == {"planned": 0.1, "open": 0.1, "feedback": 0.08}
+    assert limits["step down"]["largest"] == {"planned": 0.06, "open": None, "feedback": 0.06}
+    assert limits["gap"]["largest"] == {"planned": None, "open": None, "feedback": None}
+    assert summarize(rows)["ladder"] == limits
+    md = render_markdown(
+        {
+            "config": {"start": [0.2, 0.0], "goal_named": [2.2, 0.0], "difficulty": 1.0,
+                       "time_budget_s": 60.0, "time_scale": 1.0, "modes": ["open", "feedback"],
+                       "workers": 2},
+            "machine": {}, "total_time_s": 1.0, "summary": summarize(rows), "rows": rows,
+        }
+    )  # fmt: skip
+    assert md.index("## Feature ladder") < md.index("## Limits (feature ladder)")
+    row = "| step up | m | 0.06: yes/yes/yes, 0.08: no/no/yes, 0.1: yes/yes/no | 0.1 | 0.1 | 0.08 |"
+    assert row in md
+
+
 def test_job_list(tmp_path):
     jobs = physics_jobs(generated=3, out_dir=tmp_path)
     assert [j["course"] for j in jobs][-4:] == ["barrier75mm", "gen:0", "gen:1", "gen:2"]
@@ -157,6 +196,10 @@ def test_job_list(tmp_path):
         courses=("flat", "gen:5:0.5"), generated=0, modes=("open",), out_dir=tmp_path
     )
     assert [j["course"] for j in custom] == ["flat", "gen:5:0.5"]
+    ladder = physics_jobs(courses=expand_courses(["ladder"]), generated=0, out_dir=tmp_path)
+    assert len(ladder) == len(ladder_course_names()) and ladder[0]["course"] == "feat:step:0.06"
+    assert {j["group"] for j in ladder} == {"ladder"} and ladder[0]["goal"] == [1.1, 0.0]
+    assert load_terrain(ladder[0]["terrain"]).name == "feat:step:0.06"
     later = physics_jobs(courses=(), generated=2, first_seed=7, out_dir=tmp_path)
     assert [j["course"] for j in later] == ["gen:7", "gen:8"]
     assert not later[0]["planned_only"]

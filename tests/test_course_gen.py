@@ -4,15 +4,22 @@ import yaml
 
 from planner.cli import main
 from planner.course_gen import (
+    EXTRA_KINDS,
     FEATURE_KINDS,
+    LADDER,
+    MAX_BARRIER_M,
     MAX_GAP_WIDTH_M,
+    MAX_INCLINE_DEG,
     MAX_RELIEF_M,
     MAX_STAIR_RISE_M,
     MAX_STEP_M,
     course_goal_xy,
     course_name,
+    course_spec,
+    feature_course,
     generate_course,
     generated_course_names,
+    ladder_course_names,
     parse_course_name,
     write_course,
 )
@@ -160,8 +167,11 @@ def test_other_lengths_and_bad_arguments():
 def test_names_resolve_to_yaml_files(tmp_path):
     assert generated_course_names(3) == ["gen:0", "gen:1", "gen:2"]
     assert course_name(4, 0.5) == "gen:4:0.5"
-    assert parse_course_name("gen:4") == (4, 1.0, 3.0)
-    assert parse_course_name("gen:4:0.5:2") == (4, 0.5, 2.0)
+    assert parse_course_name("gen:4") == (4, 1.0, 3.0, FEATURE_KINDS)
+    assert parse_course_name("gen:4:0.5:2") == (4, 0.5, 2.0, FEATURE_KINDS)
+    assert parse_course_name("gen:4:1:3:step+barrier") == (4, 1.0, 3.0, ("step", "barrier"))
+    with pytest.raises(InputError, match="gen:4:1:3:step\\+wall.*unknown feature kind 'wall'"):
+        parse_course_name("gen:4:1:3:step+wall")
     assert parse_course_name("flat") is None
     with pytest.raises(InputError, match="gen:SEED"):
         parse_course_name("gen:x")
@@ -216,3 +226,73 @@ def test_plan_walks_to_a_generated_course_end_by_default(tmp_path, capsys):
     assert main(["plan", "--terrain", "flat", "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "--goal: required" in err
+
+
+def test_issue_15_kinds_are_drawn_when_asked_for_within_their_maxima():
+    """Inclines and barriers only with ``kinds``; their sizes, measured on the sharp terrain,
+    stay within MAX_INCLINE_DEG and MAX_BARRIER_M; the default deck never draws them."""
+    seen = set()
+    for seed in range(12):
+        spec = generate_course(seed, kinds=("step",) + EXTRA_KINDS)
+        assert spec["name"] == f"gen:{seed}:1:3:step+incline+barrier"
+        terrain = load_terrain(spec["name"])
+        assert terrain.spec == Terrain.from_spec(spec).spec
+        for a, b, _, seg in _segments(spec)[1:-1]:
+            seen.add(seg["kind"])
+            assert seg["kind"] in ("step", "slope", "barrier")
+            x = np.arange(a, b, DX_M)
+            z = terrain.height_sharp(x, np.zeros_like(x))
+            if seg["kind"] == "slope":
+                grade = np.abs(np.diff(z)).max() / DX_M
+                assert 0.0 < np.degrees(np.arctan(grade)) <= MAX_INCLINE_DEG + 0.01, seed
+            elif seg["kind"] == "barrier":
+                assert 0.0 < z.max() - z[0] <= MAX_BARRIER_M + 1e-9
+                assert z[-1] == pytest.approx(z[0], abs=1e-9)  # a barrier changes no level
+    assert seen == {"step", "slope", "barrier"}
+    for seed in range(12):
+        assert not {s["kind"] for s in generate_course(seed)["segments"]} & {"slope", "barrier"}
+    with pytest.raises(InputError, match="--kinds: unknown feature kind 'wall'"):
+        generate_course(1, kinds=("wall",))
+
+
+def test_the_feature_ladder_measures_what_its_names_say():
+    """feat:KIND:SIZE has one feature of that size, measured on the sharp terrain along
+    y = 0, and a flat start and end; the goal lies past the feature on level ground."""
+    names = ladder_course_names()
+    assert len(names) == sum(len(v) for v in LADDER.values()) and "feat:step:-0.1" in names
+    for name in names:
+        _, kind, size = name.split(":")
+        size = float(size)
+        terrain = load_terrain(name)
+        spec = terrain.spec
+        assert course_spec(name) == feature_course(kind, size)
+        assert spec == Terrain.from_spec(feature_course(kind, size)).spec
+        gx, _ = course_goal_xy(spec)
+        x = np.arange(-0.5, gx + 0.3, DX_M)
+        z = terrain.height_sharp(x, np.zeros_like(x))
+        assert np.abs(z[x < 0.74]).max() < 1e-9, name  # flat start
+        end = z[(x > gx - 0.15) & (x < gx + 0.3)]
+        assert np.ptp(end) < 1e-9, name  # level around the goal
+        jumps = np.diff(z)
+        if kind == "step":
+            assert z[-1] == pytest.approx(size) and np.abs(jumps).max() == pytest.approx(abs(size))
+        elif kind == "stairs":
+            assert z[-1] == pytest.approx(3 * size)
+            assert np.sort(np.abs(jumps))[-3:] == pytest.approx([abs(size)] * 3)
+        elif kind == "gap":
+            assert (z < -0.04).sum() * DX_M == pytest.approx(size, abs=2 * DX_M)
+        elif kind == "incline":
+            grade = np.diff(z).max() / DX_M
+            assert np.degrees(np.arctan(grade)) == pytest.approx(size, abs=0.05)
+        elif kind == "barrier":
+            assert z.max() == pytest.approx(size) and z[-1] == 0.0
+        else:  # stones: 8 cm stones, pit floor 8 cm down between them, gaps of ``size``
+            rows = int(np.floor((1.2 - size) / (0.08 + size) + 1e-9))
+            y_row = -0.6 + 0.5 * (1.2 - rows * 0.08 - (rows - 1) * size) + 0.04
+            z = terrain.height_sharp(x, np.full_like(x, y_row))
+            floor = np.isclose(z, -0.08)
+            runs = np.diff(np.flatnonzero(np.diff(np.r_[0, floor.astype(int), 0])))[::2]
+            assert len(runs) == 5 and runs.max() * DX_M == pytest.approx(size, abs=3 * DX_M)
+    for bad in ("feat:gap", "feat:wall:0.1", "feat:gap:-0.1", "feat:gap:x"):
+        with pytest.raises(InputError, match=f"course '{bad}': expected feat:KIND:SIZE"):
+            load_terrain(bad)
