@@ -34,11 +34,8 @@ Theta3
 from __future__ import annotations
 
 import argparse
-import datetime as _dt
 import json
 import os
-import platform
-import subprocess
 import sys
 import time
 import warnings
@@ -48,6 +45,7 @@ from typing import Any
 
 import numpy as np
 
+from planner.machine import machine_info
 from planner.outputs import write_atomic
 from planner.problems import Theta1, Theta2, Theta3, Theta4
 from planner.problems.base import FEASIBILITY_TOL, ThetaOptions, ThetaProblem
@@ -521,42 +519,6 @@ def _speed_ratio(ipopt: list[SolveRecord], slsqp: list[SolveRecord]) -> float:
     )
 
 
-def _machine() -> dict[str, Any]:
-    import casadi
-    import scipy
-
-    cpu = ""
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    try:
-        commit = subprocess.run(
-            ["git", "rev-parse", "--short", "HEAD"],
-            capture_output=True,
-            text=True,
-            timeout=5,
-            cwd=Path(__file__).resolve().parent,
-        ).stdout.strip()
-    except (OSError, subprocess.SubprocessError):
-        commit = ""
-    return {
-        "nproc": os.cpu_count(),
-        "cpu": cpu,
-        "platform": platform.platform(),
-        "python": platform.python_version(),
-        "numpy": np.__version__,
-        "casadi": casadi.__version__,
-        "scipy": scipy.__version__,
-        "git_commit": commit,
-        "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-        "load_average_1_5_15_at_start": [round(v, 2) for v in os.getloadavg()],
-    }
-
-
 def _records_json(
     theta: str, terrain: str, solver: str, idx: list[int], recs: list[SolveRecord]
 ) -> dict[str, Any]:
@@ -632,7 +594,7 @@ def run_theta_bench(
     from planner.terrain import load_terrain
 
     t_start = time.perf_counter()
-    machine = _machine()
+    machine = machine_info()
     robot = load_robot(robot_name)
     cache = ProblemCache()
     compiled = ProblemCache(ThetaOptions(jit=True)) if jit else None

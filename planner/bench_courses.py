@@ -158,7 +158,7 @@ def run_course_bench(
     Without ``resume`` an old ``courses.jsonl`` is replaced; with it, finished jobs are
     kept and only the others run. Returns the content of ``courses.json``.
     """
-    from planner.bench import _machine
+    from planner.machine import machine_info
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -166,7 +166,7 @@ def run_course_bench(
     if not resume and results.exists():
         results.unlink()
     jobs = course_jobs(robots, courses, planners, time_budget_s=time_budget_s)
-    machine = _machine()
+    machine = machine_info()
     t0 = time.perf_counter()
     summary = run_batch(
         jobs,

@@ -530,7 +530,7 @@ def run_physics_bench(
     error are kept and only the others run. Returns the content of ``physics.json``.
     """
     from planner.batch import _Progress, _Writer, read_results
-    from planner.bench import _machine
+    from planner.machine import machine_info
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -553,7 +553,7 @@ def run_physics_bench(
     )
     done = {k: v for k, v in read_results(path).items() if v.get("status") == "ok"}
     todo = [j for j in jobs if job_id(j) not in done]
-    machine = _machine()
+    machine = machine_info()
     t0 = time.perf_counter()
     writer = _Writer(path, None)
     bar = _Progress(len(todo), len(jobs) - len(todo), enabled=progress)
