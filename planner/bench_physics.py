@@ -341,6 +341,10 @@ def ladder_limits(rows: Sequence[dict]) -> dict[str, Any]:
             what: max((v for v in sizes if entry["sizes"][v].get(what)), default=None)
             for what in ["planned", *sorted(modes)]
         }
+        # the planner's limit is where it first fails: a larger size reached beyond it is luck
+        entry["smallest_not_planned"] = min(
+            (v for v in sizes if not entry["sizes"][v]["planned"]), default=None
+        )
         entry["sizes"] = {f"{v:g}": entry["sizes"][v] for v in sizes}
     return out
 
@@ -350,16 +354,16 @@ def _ladder_lines(limits: dict[str, Any], modes: Sequence[str]) -> list[str]:
     lines = [
         "| feature | unit | sizes: planned / "
         + " / ".join(MODE_NAMES.get(m, m) for m in modes)
-        + " | largest planned | "
+        + " | smallest not planned | largest planned | "
         + " | ".join(f"largest, {MODE_NAMES.get(m, m)}" for m in modes)
         + " |",
-        "|---|---|---|---:|" + "---:|" * len(modes),
+        "|---|---|---|---:|---:|" + "---:|" * len(modes),
     ]
     for family, e in limits.items():
         cells = ", ".join(
             f"{v}: " + "/".join(_yn(c.get(n)) for n in names) for v, c in e["sizes"].items()
         )
-        big = [_f(e["largest"].get(n), "g") for n in names]
+        big = [_f(e["smallest_not_planned"], "g")] + [_f(e["largest"].get(n), "g") for n in names]
         lines.append(f"| {family} | {e['unit']} | {cells} | " + " | ".join(big) + " |")
     return lines
 
@@ -417,6 +421,13 @@ def _summary_lines(s: dict[str, Any]) -> list[str]:
         for mode, v in g["modes"].items():
             frac = "-" if v["fraction"] is None else f"{100 * v['fraction']:.0f} %"
             lines.append(f"  - {MODE_NAMES.get(mode, mode)}: {v['success']} of {v['of']} ({frac})")
+    ladder = s.get("ladder") or {}
+    if ladder:
+        sizes = [c for e in ladder.values() for c in e["sizes"].values()]
+        lines.append(
+            f"- feature ladder: {sum(c['planned'] for c in sizes)} of {len(sizes)} sizes planned "
+            "(each feature's limits in the table above)"
+        )
     return lines
 
 

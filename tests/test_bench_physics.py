@@ -166,6 +166,9 @@ def test_ladder_limits_are_the_largest_sizes_reached():
     assert up["largest"] == {"planned": 0.1, "open": 0.1, "feedback": 0.08}
     assert limits["step down"]["largest"] == {"planned": 0.06, "open": None, "feedback": 0.06}
     assert limits["gap"]["largest"] == {"planned": None, "open": None, "feedback": None}
+    assert (
+        up["smallest_not_planned"] == 0.08 and limits["step down"]["smallest_not_planned"] is None
+    )
     assert summarize(rows)["ladder"] == limits
     md = render_markdown(
         {
@@ -176,7 +179,8 @@ def test_ladder_limits_are_the_largest_sizes_reached():
         }
     )  # fmt: skip
     assert md.index("## Feature ladder") < md.index("## Limits (feature ladder)")
-    row = "| step up | m | 0.06: yes/yes/yes, 0.08: no/no/yes, 0.1: yes/yes/no | 0.1 | 0.1 | 0.08 |"
+    row = "| step up | m | 0.06: yes/yes/yes, 0.08: no/no/yes, 0.1: yes/yes/no | 0.08 | 0.1 | 0.1 |"
+    row += " 0.08 |"
     assert row in md
 
 
