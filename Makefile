@@ -22,11 +22,14 @@ test: $(STAMP)
 # courses: LittleDog x 17 courses (9 named, 8 of issue 15) x soft/recursive, 240 s budget;
 #   ~60 min on 2 cores
 # physics: 9 courses + 20 generated, plan then MuJoCo open/feedback/correct at time scale 1;
-#   ~90 min on 2 cores (a 2 m plan takes 30-60 s since the rolling feet; see the README)
+#   ~90 min on 2 cores (a 2 m plan takes 30-60 s since the rolling feet; see the README);
+#   ladder: one feature per course at growing sizes, the limits table (~20 min)
 bench: $(STAMP)
 	$(VENV)/bin/stratawalk bench theta --jit
 	$(VENV)/bin/stratawalk bench courses
 	$(VENV)/bin/stratawalk bench physics
+	$(VENV)/bin/stratawalk bench physics --courses ladder --generated 0 --modes open,feedback \
+		--planned-only --time-budget 120 --out bench/results/ladder
 
 # every command fed generated bad input (hypothesis), 20x the cases of make test (~6,600,
 # a fresh seed each run): never a traceback, never a hang; ~6 min on 2 cores
