@@ -33,6 +33,7 @@ __all__ = [
     "swing_point_from_centre",
     "foot_centres_W",
     "contact_points_from_centres",
+    "unique_contact_points",
 ]
 
 _Array = NDArray[np.float64]
@@ -230,3 +231,18 @@ def contact_points_from_centres(
     r1 = c - rho * np.asarray(terrain.normal(r1)).reshape(-1, 3)
     del miss2  # r2 (tangent plane under the centre) only seeds the solve
     return r1, miss1
+
+
+def unique_contact_points(
+    terrain: TerrainLike, centres_W: _Array, radius_m: float
+) -> tuple[_Array, _Array]:
+    """:func:`contact_points_from_centres`, solved once per distinct centre.
+
+    A stance foot keeps its sphere centre along a leaf, so a plan's thousands of stance
+    samples hold a few hundred distinct centres.
+    """
+    centres_W = np.asarray(centres_W, dtype=float).reshape(-1, 3)
+    keys = np.round(centres_W / 1e-10)
+    _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    pts, fit = contact_points_from_centres(terrain, centres_W[first], radius_m)
+    return pts[inverse.ravel()], fit[inverse.ravel()]

@@ -672,7 +672,7 @@ class Plan:
         Feet are not stored per sample: each foot's sphere centre c comes from Pinocchio
         forward kinematics; a foot in contact gets the contact point ``c - rho n`` (the
         terrain normal n of whichever contact convention fits c better, see
-        :func:`planner.validate.contact_points_from_centres`; the two agree on planar
+        :func:`planner.contact.contact_points_from_centres`; the two agree on planar
         ground), a swing foot the point ``c - rho e_z``. The stratum comes from the contact flags;
         ``support`` is the feet in contact; ``info`` holds ``sample`` and ``time``.
 
@@ -682,9 +682,8 @@ class Plan:
             A sample with fewer than three feet in contact (no stratum describes it).
 
         """
-        from planner.contact import swing_point_from_centre
+        from planner.contact import swing_point_from_centre, unique_contact_points
         from planner.lie import rotation_from_quat
-        from planner.validate import _unique_contacts
 
         robot, terrain = self.load_robot(), self.load_terrain()
         rho = robot.foot_radius_m
@@ -692,7 +691,7 @@ class Plan:
         down = self.samples.contact
         feet_all = swing_point_from_centre(centres, rho)
         if down.any():
-            feet_all[down] = _unique_contacts(terrain, centres[down], rho)[0]
+            feet_all[down] = unique_contact_points(terrain, centres[down], rho)[0]
         out = []
         for k, (q, c) in enumerate(zip(self.samples.q, self.samples.contact, strict=True)):
             up = np.flatnonzero(~c)

@@ -84,7 +84,12 @@ import pinocchio as pin
 from numpy.typing import NDArray
 
 from planner import statics
-from planner.contact import E_Z, contact_points_from_centres, foot_centre_from_contact
+from planner.contact import (
+    E_Z,
+    contact_points_from_centres,
+    foot_centre_from_contact,
+    unique_contact_points,
+)
 from planner.errors import PlannerError
 from planner.links import LegLinks
 from planner.plan import Plan
@@ -333,18 +338,6 @@ def sharp_surface_distance(
             np.minimum.at(d, ip, dface)
         best[a : a + n] = np.minimum(best[a : a + n], d)
     return np.where(gap >= 0.0, 1.0, -1.0) * best
-
-
-def _unique_contacts(terrain: Terrain, centres_W: _Array, radius_m: float) -> tuple[_Array, _Array]:
-    """:func:`contact_points_from_centres`, solved once per distinct centre.
-
-    A stance foot keeps its sphere centre along a leaf, so a plan's thousands of stance
-    samples hold a few hundred distinct centres.
-    """
-    keys = np.round(np.asarray(centres_W, dtype=float).reshape(-1, 3) / 1e-10)
-    _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
-    pts, fit = contact_points_from_centres(terrain, centres_W[first], radius_m)
-    return pts[inverse.ravel()], fit[inverse.ravel()]
 
 
 class _TileMax:
@@ -612,7 +605,7 @@ class _Checker:
         contacts = centres - rho * E_Z
         miss = np.zeros(down.shape)
         if down.any():
-            contacts[down], miss[down] = _unique_contacts(terrain, centres[down], rho)
+            contacts[down], miss[down] = unique_contact_points(terrain, centres[down], rho)
 
         n_down = down.sum(axis=1)
         for k in np.flatnonzero(n_down < tol.min_contacts):
