@@ -892,6 +892,9 @@ def add_bench_parser(subparsers) -> argparse.ArgumentParser:
     from planner.bench_physics import add_physics_parser
 
     add_physics_parser(sub)
+    from planner.bench_speed import add_speed_parser
+
+    add_speed_parser(sub)
     return bench
 
 
