@@ -318,21 +318,27 @@ def generate_course(
         x += seg["length"]
         level += _level_change(seg)
     segments.append({"kind": "flat", "length": round(length_m - x + FLAT_END_M, 4)})
-    total = sum(s["length"] for s in segments)
+    return _course(
+        course_name(seed, difficulty, length_m, kinds),
+        f"Generated course (planner.course_gen), seed {seed}, difficulty {d:g}: flat to "
+        f"x = {FLAT_START_END_M} m, then {', '.join(placed) or 'nothing'}, flat from "
+        f"x = {length_m:g} m.",
+        segments,
+    )
+
+
+def _course(name: str, description: str, segments: list[dict[str, Any]]) -> dict[str, Any]:
+    """A spec of kind ``course`` with the generator's fixed fields (friction, extent)."""
     return {
-        "name": course_name(seed, difficulty, length_m, kinds),
-        "description": (
-            f"Generated course (planner.course_gen), seed {seed}, difficulty {d:g}: flat to "
-            f"x = {FLAT_START_END_M} m, then {', '.join(placed) or 'nothing'}, flat from "
-            f"x = {length_m:g} m."
-        ),
+        "name": name,
+        "description": description,
         "friction": FRICTION,
         "x_min": X_MIN_M,
         "y_min": Y_MIN_M,
         "y_max": Y_MAX_M,
         "kind": "course",
         "segments": segments,
-        "length": round(total, 6),
+        "length": round(sum(s["length"] for s in segments), 6),
     }
 
 
@@ -447,22 +453,13 @@ def feature_course(kind: str, size: float) -> dict:
                "x_end": _r(0.15 + pit), "y_start": Y_MIN_M, "y_end": Y_MAX_M, "size": 0.08,
                "gap": _r(size), "height": 0.0, "height_jitter": 0.0, "depth": 0.08,
                "seed": 0}  # fmt: skip
-    segments = [{"kind": "flat", "length": FLAT_START_END_M - X_MIN_M}, seg]
-    segments.append({"kind": "flat", "length": FLAT_END_M})
-    total = sum(s["length"] for s in segments)
-    name = feature_course_name(kind, size)
-    return {
-        "name": name,
-        "description": f"Feature ladder (planner.course_gen): one {kind} of size {size:g} "
+    flat_start = {"kind": "flat", "length": FLAT_START_END_M - X_MIN_M}
+    return _course(
+        feature_course_name(kind, size),
+        f"Feature ladder (planner.course_gen): one {kind} of size {size:g} "
         f"{LADDER_UNITS[kind]} from x = {FLAT_START_END_M + 0.15:g} m.",
-        "friction": FRICTION,
-        "x_min": X_MIN_M,
-        "y_min": Y_MIN_M,
-        "y_max": Y_MAX_M,
-        "kind": "course",
-        "segments": segments,
-        "length": round(total, 6),
-    }
+        [flat_start, seg, {"kind": "flat", "length": FLAT_END_M}],
+    )
 
 
 def feature_course_name(kind: str, size: float) -> str:
