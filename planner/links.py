@@ -106,6 +106,40 @@ def _shape(root: ET.Element, link: str) -> tuple[_Array, _Array, float, str] | N
     return None
 
 
+def _outside_sphere(a: _Array, b: _Array, r: float, centre: _Array, rho: float):
+    """Segment a-b without its end that sweeps a radius-``r`` ball inside the ``rho`` sphere.
+
+    A point p of the axis whose ball lies within the foot sphere (|p - centre| <= rho - r)
+    cannot meet the terrain unless the foot does, which its contact checks already cover;
+    such an end is cut back to where the ball touches the sphere from inside. Unchanged
+    when the link is as thick as the foot or both ends are inside.
+    """
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    inner = rho - r
+    if inner <= 0.0:
+        return a, b
+    d = b - a
+    length = float(np.linalg.norm(d))
+    if length == 0.0:
+        return a, b
+    u = d / length
+    w = a - np.asarray(centre, float)
+    # |a + s u - centre| = inner: s^2 + 2 (w.u) s + |w|^2 - inner^2 = 0
+    bq, cq = float(w @ u), float(w @ w) - inner**2
+    disc = bq * bq - cq
+    if disc <= 0.0:
+        return a, b  # the axis misses the inner ball
+    s0, s1 = -bq - math.sqrt(disc), -bq + math.sqrt(disc)
+    a_in, b_in = s0 <= 0.0 <= s1, s0 <= length <= s1
+    if a_in and b_in:
+        return a, b
+    if b_in:
+        return a, a + max(s0, 0.0) * u
+    if a_in:
+        return a + min(s1, length) * u, b
+    return a, b
+
+
 def _child_link(root: ET.Element, joint_name: str) -> str:
     el = root.find(f"./joint[@name='{joint_name}']/child")
     return "" if el is None else str(el.get("link"))
@@ -140,6 +174,12 @@ class LegLinks:
                     r = FALLBACK_RADIUS_FRACTION * float(np.linalg.norm(b))
                     shape = (a, b, r, "joint-to-joint segment (no collision shape)")
                 a, b, r, src = shape
+                if k == 2:  # the shank's end inside the foot sphere is the foot's
+                    self._fk(pin.neutral(self.model))
+                    oMi = self.data.oMi[jid]
+                    foot_W = self.data.oMf[self.model.getFrameId(leg.foot_frame)].translation
+                    foot_J = oMi.rotation.T @ (np.asarray(foot_W) - oMi.translation)
+                    a, b = _outside_sphere(a, b, r, foot_J, robot.foot_radius_m)
                 caps.append(Capsule(leg.index, link, urdf_link, jid, a, b, r, src))
         self.capsules = caps
         # each capsule's ends in body frame at zero joint angles (the root joint at identity)

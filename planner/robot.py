@@ -29,6 +29,10 @@ from planner.errors import RobotModelError
 
 LEG_NAMES = ("FL", "FR", "HL", "HR")  # the paper's legs 1..4
 MODELS_DIR = Path(__file__).resolve().parents[1] / "models"
+# a foot without a collision sphere in the URDF (a mesh, or none) gets a sphere of this
+# share of its shank (knee to foot point): the sphere feet of littledog, go1, a1, b1,
+# laikago and anymal measure 0.086-0.11 of their shanks (hyq 0.063)
+FOOT_RADIUS_FRACTION = 0.1
 
 # example-robot-data ships URDFs under <prefix>/share/example-robot-data/robots (no loader).
 _ERD_ROBOTS = {
@@ -121,6 +125,7 @@ class Robot:
     body_com_B: np.ndarray  # (3,) COM of the root link alone
     theta_nor: np.ndarray = field(default=None)  # (4, 3) normal configuration [rad]
     reach_m: np.ndarray = field(default=None)  # (4,) max distance hip centre -> foot centre
+    foot_radius_source: str = "urdf collision sphere"
 
     @property
     def joint_names(self) -> list[str]:
@@ -350,6 +355,35 @@ def _check_mass_and_limits(path: Path, model: pin.Model) -> None:
             )
 
 
+def _foot_sphere(
+    root: ET.Element, model: pin.Model, frame_id: int, path: Path
+) -> tuple[np.ndarray, float] | None:
+    """(centre in the frame [m], radius [m]) of the foot link's largest collision sphere."""
+    frame = model.frames[frame_id]
+    best = None
+    for link in {frame.name, model.frames[frame.parentFrame].name}:
+        for kind, attrib, xyz in _link_geometry(root, link, path):
+            if kind == "sphere":
+                where = f"link {link!r}: <sphere radius"
+                r = float(_numbers(path, where, attrib.get("radius"), 1)[0])
+                if best is None or r > best[1]:
+                    best = (np.asarray(xyz, float), r)
+    return best
+
+
+def _add_sphere_frame(model: pin.Model, frame_name: str, offset: np.ndarray) -> str:
+    """Add an operational frame at ``offset`` [m] in frame ``frame_name``; return its name."""
+    parent_id = model.getFrameId(frame_name)
+    parent = model.frames[parent_id]
+    name = f"{frame_name}_sphere_centre"
+    if not model.existFrame(name):
+        placement = parent.placement * pin.SE3(np.eye(3), np.asarray(offset, float))
+        model.addFrame(
+            pin.Frame(name, parent.parentJoint, parent_id, placement, pin.FrameType.OP_FRAME)
+        )
+    return name
+
+
 def load_robot(name_or_path: str | Path, foot_radius_m: float | None = None) -> Robot:
     """Load a quadruped by name (``littledog``, ``solo12``, ...) or from a URDF path.
 
@@ -405,18 +439,26 @@ def load_robot(name_or_path: str | Path, foot_radius_m: float | None = None) -> 
         leg.index, leg.name = slot, LEG_NAMES[slot]
     legs.sort(key=lambda leg: leg.index)
 
-    # foot radius: a sphere collision on the foot's link (or the URDF link named as the frame)
-    radius = foot_radius_m
+    # foot spheres: a sphere collision on the foot's link, its centre the foot point
+    # (a frame is added where the sphere sits off the link's origin); none: a derived radius
+    spheres = [_foot_sphere(root, model, model.getFrameId(leg.foot_frame), path) for leg in legs]
+    radius, foot_source = foot_radius_m, "given"
+    if any(sp is not None for sp in spheres):
+        for leg, sp in zip(legs, spheres, strict=True):
+            if sp is not None and np.linalg.norm(sp[0]) > 1e-6:
+                leg.foot_frame = _add_sphere_frame(model, leg.foot_frame, sp[0])
+        if radius is None:
+            radius = max(sp[1] for sp in spheres if sp is not None)
+            foot_source = "urdf collision sphere"
+    data = model.createData()
+    pin.forwardKinematics(model, data, q0)
+    pin.updateFramePlacements(model, data)
+    for leg in legs:
+        leg.foot_B0 = data.oMf[model.getFrameId(leg.foot_frame)].translation.copy()
     if radius is None:
-        radius = 0.0
-        for leg in legs:
-            frame = model.frames[model.getFrameId(leg.foot_frame)]
-            for link in {frame.name, model.frames[frame.parentFrame].name}:
-                for kind, attrib, xyz in _link_geometry(root, link, path):
-                    if kind == "sphere" and np.linalg.norm(xyz) < 1e-6:
-                        where = f"link {link!r}: <sphere radius"
-                        r = float(_numbers(path, where, attrib.get("radius"), 1)[0])
-                        radius = max(radius, r)
+        shank_m = min(float(np.linalg.norm(leg.foot_B0 - leg.points_B[2])) for leg in legs)
+        radius = FOOT_RADIUS_FRACTION * shank_m
+        foot_source = f"{FOOT_RADIUS_FRACTION:g} x the shank length (no sphere foot in the URDF)"
 
     root_link = model.frames[2].name if len(model.frames) > 2 else ""
     root_link = next(
@@ -449,6 +491,7 @@ def load_robot(name_or_path: str | Path, foot_radius_m: float | None = None) -> 
         model=model,
         legs=legs,
         foot_radius_m=float(radius),
+        foot_radius_source=foot_source,
         body_box_B=box,
         body_box_source=source,
         total_mass_kg=float(sum(inert.mass for inert in model.inertias)),

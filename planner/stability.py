@@ -19,11 +19,12 @@ from __future__ import annotations
 
 import casadi as ca
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
     "BALANCE_MARGIN_M",
     "PATH_BALANCE_MARGIN_M",
+    "polygon_margin_m",
     "support_margin_m",
     "support_margins_ca",
     "triangle_inradius_m",
@@ -50,6 +51,43 @@ def support_margin_m(feet_W: ArrayLike, com_W: ArrayLike) -> float:
         e = tri[b] - tri[a]
         out = min(out, sign * _cross(e, p - tri[a]) / float(np.linalg.norm(e)))
     return float(out)
+
+
+def polygon_margin_m(feet_W: ArrayLike, com_W: ArrayLike) -> float:
+    """Signed horizontal distance [m] of ``com_W`` inside the convex hull of the feet.
+
+    Any number of feet (four: the four-leg support polygon); positive inside, negative
+    outside (then minus the distance to the nearest hull edge's line, a lower bound).
+    """
+    pts = np.asarray(feet_W, dtype=float).reshape(-1, 3)[:, :2]
+    p = np.asarray(com_W, dtype=float).reshape(-1)[:2]
+    hull = _convex_hull(pts)
+    if len(hull) < 3:
+        return -float(min(np.linalg.norm(pts - p, axis=1)))
+    out = np.inf
+    for a, b in zip(hull, np.roll(hull, -1, axis=0), strict=True):
+        e = b - a
+        out = min(out, _cross(e, p - a) / float(np.linalg.norm(e)))
+    return float(out)
+
+
+def _convex_hull(pts: NDArray) -> NDArray:
+    """Counter-clockwise hull vertices of 2-D points (Andrew's monotone chain)."""
+    order = sorted(map(tuple, np.round(pts, 12)))
+    if len(order) < 3:
+        return np.array(order)
+
+    def half(seq):
+        out: list = []
+        for q in seq:
+            while len(out) >= 2:
+                if _cross(np.subtract(out[-1], out[-2]), np.subtract(q, out[-2])) > 0:
+                    break
+                out.pop()
+            out.append(q)
+        return out[:-1]
+
+    return np.array(half(order) + half(order[::-1]))
 
 
 def triangle_inradius_m(feet_W: ArrayLike) -> float:

@@ -73,3 +73,48 @@ def test_path_margin_and_witnesses_flag_a_shank_at_an_edge(littledog):
     exact = sharp_surface_distance(terrain, links.axis_points_W(q), 0.05, step_m=5e-4)
     clear = (exact - links.radius)[links.owner == c].min()
     assert clear < KEYFRAME_MARGIN_M + KEYFRAME_ANGLE_RAD * 0.2  # near, by the exact measure
+
+
+def test_the_shank_end_inside_the_foot_sphere_is_cut(rng):
+    """What is cut lies inside the foot sphere; the new end's ball touches it from inside."""
+    from planner.links import _outside_sphere
+
+    cuts = 0
+    for _ in range(300):
+        c = rng.normal(size=3) * 0.01
+        rho, r = rng.uniform(0.01, 0.03), rng.uniform(0.002, 0.03)
+        a, b = rng.normal(size=3) * 0.1, c + rng.normal(size=3) * 0.01
+        a2, b2 = _outside_sphere(a, b, r, c, rho)
+        np.testing.assert_allclose(a2, a)  # only the end at the foot moves here
+        inside_b = np.linalg.norm(b - c) + r <= rho
+        if np.linalg.norm(b2 - b) > 1e-12:
+            cuts += 1
+            t = np.linspace(0.0, 1.0, 50)[:, None]
+            cut = b2 + t * (b - b2)  # the removed part of the axis
+            assert np.all(np.linalg.norm(cut - c, axis=1) + r <= rho + 1e-9)
+            assert np.linalg.norm(b2 - c) + r == pytest.approx(rho)
+            assert np.dot(b2 - a, b - a) > 0  # cut back along the segment, not past a
+        else:  # kept: the end's ball is not inside the foot sphere (or the whole link is)
+            assert not inside_b or np.linalg.norm(a - c) + r <= rho
+    assert cuts > 20
+
+
+def test_littledog_shanks_are_not_cut_and_hyq_shanks_are(littledog):
+    """LittleDog's shank cylinder stops short of its foot; HyQ's reaches the foot centre."""
+    from planner.robot import load_robot
+
+    ld = {c.link: c.length_m for c in leg_links(littledog).capsules if c.leg == 0}
+    assert ld["shank"] == pytest.approx(0.0917, abs=5e-4)
+    hyq = load_robot("hyq")
+    shank = next(c for c in leg_links(hyq).capsules if c.leg == 0 and c.link == "shank")
+    foot = hyq.legs[0]
+    # the capsule's end ball now touches the foot sphere from inside
+    import pinocchio as pin
+
+    d = hyq.model.createData()
+    pin.framesForwardKinematics(hyq.model, d, pin.neutral(hyq.model))
+    M = d.oMi[shank.joint_id]
+    centre = d.oMf[hyq.model.getFrameId(foot.foot_frame)].translation
+    end_W = min((M.rotation @ e + M.translation for e in (shank.a_J, shank.b_J)),
+                key=lambda p: np.linalg.norm(p - centre))  # fmt: skip
+    assert np.linalg.norm(end_W - centre) + shank.radius_m == pytest.approx(hyq.foot_radius_m)

@@ -336,3 +336,25 @@ def test_a_path_from_a_start_out_of_reach_may_only_come_back_into_reach(flat_pla
     assert "sample 2 of the path leaves the reach of HR" in why
     # a path that left the reach after being in it is refused as before
     assert "sample 2" in lp.path_problem(path([0.0, 0.0, 0.001, 0.0]))
+
+
+def test_a_long_legged_robot_ends_standing_over_the_goal():
+    """Laikago's stride (17 cm) is long next to the 5 cm goal tolerance: its crawl stepped in
+    place around the goal (no keyframe nearer than 7 cm). The arrival move (four feet, S0)
+    brings the COM over the goal; the plan passes the validator."""
+    from planner.terrain import Terrain
+    from planner.walk import plan_walk
+
+    robot = load_robot("laikago")
+    flat = Terrain.from_spec({"name": "flat", "kind": "flat", "friction": 0.7, "length": 3.0})
+    plan = _checked(plan_walk(robot, flat, (1.2, 0.0), (0.0, 0.0), "soft"))
+    assert plan.outcome["reached_goal"], plan.outcome["message"]
+    last = plan.keyframes[-1]
+    assert last.stratum == 0 and sorted(last.support) == [1, 2, 3, 4]
+    q = robot.q_from(last.base_position, last.base_quaternion, last.joints)
+    com = pin.centerOfMass(robot.model, robot.model.createData(), q)
+    assert np.linalg.norm(com[:2] - [1.2, 0.0]) < 0.01
+    # the arrival is a body move: the feet stay, their contact points moved only by the
+    # sphere feet rolling as the shanks turn (radius x rotation: under half a radius)
+    moved = np.linalg.norm(np.asarray(last.feet) - plan.keyframes[-2].feet, axis=1)
+    assert np.all(moved < 0.5 * robot.foot_radius_m)

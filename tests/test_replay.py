@@ -452,7 +452,7 @@ def test_compare_draws_a_second_motion_on_the_same_clock(walk):
     np.testing.assert_allclose(cmp[:, [0, 2]], own[:, [0, 2]], atol=2e-6)
     # the plan's own robot holds its last pose until the compared motion ends
     _, last = _track(clips, "robot/body_0", "position", times=[end])
-    np.testing.assert_allclose(last[0], own[-1], atol=1e-9)
+    np.testing.assert_allclose(last[0], own[-1], atol=2e-6)  # float32 tracks, as above
 
 
 def test_compare_from_the_command_line(walk, tmp_path, capsys):

@@ -137,3 +137,34 @@ def test_q_layout_roundtrip(littledog):
     assert q.shape == (r.model.nq,)
     np.testing.assert_array_equal(r.joints_from_q(q), joints)
     pin.normalize(r.model, q)  # a valid Pinocchio configuration
+
+
+def test_an_offset_foot_sphere_gets_a_frame_at_its_centre():
+    """ANYmal's foot sphere sits 22.5 mm up its foot link: the foot point is its centre."""
+    import pinocchio as pin
+
+    r = load_robot("anymal")
+    assert r.foot_radius_m == pytest.approx(0.03)
+    assert r.foot_radius_source == "urdf collision sphere"
+    m = r.model
+    d = m.createData()
+    q = pin.neutral(m)
+    pin.framesForwardKinematics(m, d, q)
+    for leg in r.legs:
+        link = leg.foot_frame.removesuffix("_sphere_centre")
+        assert link != leg.foot_frame and m.existFrame(link)
+        M = d.oMf[m.getFrameId(link)]
+        expected = M.translation + M.rotation @ np.array([0.0, 0.0, 0.0225])
+        np.testing.assert_allclose(d.oMf[m.getFrameId(leg.foot_frame)].translation, expected,
+                                   atol=1e-12)  # fmt: skip
+        np.testing.assert_allclose(leg.foot_B0, expected, atol=1e-12)
+
+
+def test_a_foot_without_a_sphere_gets_a_tenth_of_its_shank():
+    """go2's and solo12's feet are meshes: radius 0.1 x knee-to-foot, said so."""
+    for name in ("go2", "solo12"):
+        r = load_robot(name)
+        shank = min(np.linalg.norm(leg.foot_B0 - leg.points_B[2]) for leg in r.legs)
+        assert r.foot_radius_m == pytest.approx(0.1 * shank)
+        assert "shank" in r.foot_radius_source
+    assert load_robot("go2", foot_radius_m=0.02).foot_radius_m == 0.02

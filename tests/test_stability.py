@@ -125,3 +125,18 @@ def test_a_triangle_narrower_than_the_margin_holds_no_com(dog):
         start, start.feet_W[[0, 1, 2]].mean(axis=0) + 0.15 * u_n, u_f, u_n
     )
     assert not sol.feasible and "balance_margin" in sol.diagnosis
+
+
+def test_polygon_margin_is_the_triangle_margin_and_the_hull_margin(rng):
+    """Three feet: :func:`support_margin_m`, inside and out; four: the hull's edges."""
+    from planner.stability import polygon_margin_m
+
+    for _ in range(200):
+        tri = rng.uniform(-0.2, 0.2, size=(3, 3))
+        p = rng.uniform(-0.3, 0.3, size=2)
+        assert polygon_margin_m(tri, p) == pytest.approx(support_margin_m(tri, p), abs=1e-9)
+    # a 0.4 x 0.2 rectangle of feet given in a crossing order
+    feet = np.array([[0.2, 0.1, 0], [-0.2, -0.1, 0], [0.2, -0.1, 0], [-0.2, 0.1, 0.05]])
+    assert polygon_margin_m(feet, [0.0, 0.0]) == pytest.approx(0.1)
+    assert polygon_margin_m(feet, [0.15, 0.02]) == pytest.approx(0.05)
+    assert polygon_margin_m(feet, [0.3, 0.0]) == pytest.approx(-0.1)

@@ -48,6 +48,7 @@ from planner.rolling import end_keyframe
 from planner.stability import (
     BALANCE_MARGIN_M,
     PATH_BALANCE_MARGIN_M,
+    polygon_margin_m,
     support_margin_m,
     triangle_inradius_m,
 )
@@ -170,6 +171,7 @@ class _Run:
     last_failure: str = ""
     best_dist_m: float = float("inf")  # nearest the COM came to the goal ...
     best_at: int = 0  # ... and in which cycle
+    arrival_tried: int = -1  # keyframe count at the last arrival attempt
 
 
 class Walk:
@@ -199,6 +201,10 @@ class Walk:
             p._append(self.samples, self.times, step.swing_path, swing_s, landing=True)
             self.keyframes += [p._swing_keyframe(step.swing_path, step.leg, p.check), step.end]
             self.steps += 1
+
+    def add_body_move(self, end: State, path: list[State]) -> None:
+        """Record a body move on the current feet (no swing), e.g. :meth:`LocalPlanner.arrival`."""
+        self.add(Step(-1, False, self.state, end, None, path, [], "arrival"))
 
     def mark(self) -> tuple[int, int, int]:
         """A bookmark for :meth:`rewind`."""
@@ -1039,12 +1045,56 @@ class LocalPlanner:
         """Horizontal distance of the whole-body COM to the goal [m]."""
         return float(np.linalg.norm(self.check.com_W(state)[:2] - run.goal))
 
+    def arrival(self, state: State, goal_xy, tau: Trajectory):
+        """A body move on all four feet bringing the COM over the goal: (end, path) or None.
+
+        Beyond the paper, whose walk ends after a step: a crawl's keyframes put the COM
+        inside a three-foot triangle, and a robot whose stride is long next to
+        ``goal_tol_m`` (b1, laikago) stepped in place around the goal without a keyframe
+        near it. Tried when the goal lies ``BALANCE_MARGIN_M`` inside the four feet's
+        support polygon: Theta2 on S0 with all four legs, its target the goal at the
+        height of the footholds' plane (:func:`support_body_target_W`), the path checked
+        as every body move's. The robot ends standing on four feet over the goal.
+        """
+        feet = np.asarray(state.feet_W, float).reshape(4, 3)
+        goal = np.asarray(goal_xy, float).reshape(-1)[:2]
+        if polygon_margin_m(feet, goal) < BALANCE_MARGIN_M:
+            return None
+        probe = np.array([goal[0], goal[1], float(state.base_position_W[2])])
+        u_f, u_n = reference_directions(tau, self.terrain, probe)
+        z, u_n = support_body_target_W(
+            self.robot, self.terrain, feet, goal, self.com_height_m(), u_f, u_n
+        )
+        rc = np.array([goal[0], goal[1], z])
+        support = (0, 1, 2, 3)
+        sol = self.theta2(support).solve(state, rc, u_f, u_n)
+        self._count("theta2", sol.feasible)
+        if not sol.feasible:
+            return None
+        sol.state.support = support
+        path = interpolate_leaf(
+            self.robot, self.terrain, state, sol.state, self.settings.body_samples
+        )
+        if self.path_problem(path):
+            return None
+        return self.path_end(path, support), path
+
     def stop_reason(self, walk: Walk, run: _Run, fails_in_row: int = 0) -> str:
-        """Why planning must stop now ("" to go on): goal, cycles, time budget, stuck."""
+        """Why planning must stop now ("" to go on): goal, cycles, time budget, stuck.
+
+        Before the goal test, the :meth:`arrival` move is tried (once per keyframe) when
+        the goal is inside the support polygon but the COM not yet near it.
+        """
         st = self.settings
         if interrupts.requested():
             return f"interrupted after {walk.steps} steps; the plan so far is kept"
         dist = self.distance_to_goal(walk.state, run)
+        if dist > st.goal_tol_m and run.arrival_tried != len(walk.keyframes):
+            run.arrival_tried = len(walk.keyframes)
+            moved = self.arrival(walk.state, run.goal, run.tau)
+            if moved is not None:
+                walk.add_body_move(*moved)
+                dist = self.distance_to_goal(walk.state, run)
         if dist <= st.goal_tol_m:
             return f"reached the goal: COM {dist * 100:.1f} cm from it"
         if run.cycles >= st.max_cycles:
