@@ -871,7 +871,9 @@ def _target_text(v: dict[str, Any]) -> str:
 def add_bench_parser(subparsers) -> argparse.ArgumentParser:
     """Add ``bench theta [--n N] [--out DIR] [--seed S] [--terrains a,b] [--slsqp-n M]``."""
     bench = subparsers.add_parser(
-        "bench", help="benchmarks (theta: IPOPT vs SLSQP; courses: walks; physics: MuJoCo runs)"
+        "bench",
+        help="benchmarks (theta: IPOPT vs SLSQP; courses: walks; physics: MuJoCo runs; "
+        "speed; robots)",
     )
     sub = bench.add_subparsers(dest="bench_target", required=True)
     t = sub.add_parser("theta", help="Theta1-4: IPOPT vs SLSQP with finite differences")
@@ -895,6 +897,9 @@ def add_bench_parser(subparsers) -> argparse.ArgumentParser:
     from planner.bench_speed import add_speed_parser
 
     add_speed_parser(sub)
+    from planner.bench_robots import add_robots_parser
+
+    add_robots_parser(sub)
     return bench
 
 

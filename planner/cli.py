@@ -21,7 +21,8 @@ def robot_summary(robot) -> str:
         f"robot {robot.name}  ({robot.urdf_path})",
         f"  total mass {robot.total_mass_kg:.3f} kg, body {robot.body_mass_kg:.3f} kg "
         f"(COM {np.round(robot.body_com_B, 4).tolist()} m in body frame)",
-        f"  foot radius {robot.foot_radius_m:.4f} m; body box P [m, body frame] "
+        f"  foot radius {robot.foot_radius_m:.4f} m ({robot.foot_radius_source}); "
+        "body box P [m, body frame] "
         f"min {np.round(robot.body_box_B[0], 4).tolist()} max "
         f"{np.round(robot.body_box_B[1], 4).tolist()} ({robot.body_box_source})",
     ]
@@ -55,12 +56,25 @@ def _cmd_robot(args) -> int:
     if args.list:
         if args.robot is not None:
             raise InputError("--list: lists every robot; give it without a robot name")
+        from planner.servo_model import servo_model
+
+        print(f"{'robot':12s} {'mass kg':>8s} {'reach m':>8s} {'foot mm':>8s} "
+              f"{'servo kp N m/rad':>16s}  URDF")  # fmt: skip
         for name in robot_names():
             try:
                 where = str(resolve_urdf(name)[1])
+                r = load_robot(name)
             except RobotModelError as exc:  # example-robot-data's folder is missing
-                where = f"(unavailable: {exc})"
-            print(f"{name:12s} {where}")
+                print(f"{name:12s} (unavailable: {exc})")
+                continue
+            derived = "" if r.foot_radius_source == "urdf collision sphere" else " *"
+            print(
+                f"{name:12s} {r.total_mass_kg:8.2f} {float(np.mean(r.reach_m)):8.3f} "
+                f"{1000 * r.foot_radius_m:6.1f}{derived or '  '} "
+                f"{servo_model(r).kp_nm_per_rad:16.1f}  {where}"
+            )
+        print("* foot radius 0.1 x the shank (no sphere foot in the URDF); servo kp: LittleDog's "
+              "scaled by mass x reach (planner.servo_model)")  # fmt: skip
         return 0
     if args.robot is None:
         raise InputError("robot: give a robot name (see stratawalk robot --list) or a URDF path")
@@ -310,7 +324,9 @@ def build_parser() -> argparse.ArgumentParser:
         "robot", help="summary of a robot: legs, joints, limits, masses, reach; or --list"
     )
     r.add_argument("robot", nargs="?", help="littledog, an example-robot-data name, or a URDF path")
-    r.add_argument("--list", action="store_true", help="the robot names and their URDFs")
+    r.add_argument(
+        "--list", action="store_true", help="the robots: mass, leg reach, foot, servo, URDF"
+    )
     r.set_defaults(func=_cmd_robot)
     t = sub.add_parser("terrain", help="list terrains, or describe/draw one")
     t.add_argument("name", nargs="?", help="terrain name (terrains/NAME.yaml) or YAML path")

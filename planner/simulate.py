@@ -105,6 +105,8 @@ class SimSettings:
     kp_nm_per_rad, kv_nm_s_per_rad : servo stiffness and damping (every joint); the servo
         torque saturates at the URDF effort limit (``effort_nm`` overrides it).
     armature_kg_m2, damping_nm_s_per_rad : reflected rotor inertia and joint friction.
+        None (these four): LittleDog's, scaled to the robot by dynamic similarity
+        (:func:`planner.servo_model.servo_model`; LittleDog: 20, 0.25, 5e-4, 0.01).
     contact_timeconst_s, impratio : MuJoCo contact stiffness (solref) and friction-cone
         impedance ratio (elliptic cones; higher keeps a static foot from creeping).
     record_hz : rate of the executed samples written out.
@@ -131,11 +133,11 @@ class SimSettings:
     control_dt_s: float = 0.004
     settle_s: float = 1.0
     hold_s: float = 0.5
-    kp_nm_per_rad: float = 20.0
-    kv_nm_s_per_rad: float = 0.25
+    kp_nm_per_rad: float | None = None
+    kv_nm_s_per_rad: float | None = None
     effort_nm: tuple[float, float, float] | None = None
-    armature_kg_m2: float = 5e-4
-    damping_nm_s_per_rad: float = 0.01
+    armature_kg_m2: float | None = None
+    damping_nm_s_per_rad: float | None = None
     contact_timeconst_s: float = 0.01
     impratio: float = 10.0
     noslip_iterations: int = 10
@@ -162,20 +164,34 @@ class SimSettings:
             )
         return self
 
+    def for_robot(self, robot: Robot) -> SimSettings:
+        """A copy with the unset servo values scaled to ``robot`` (:mod:`planner.servo_model`)."""
+        from dataclasses import replace
+
+        from planner.servo_model import servo_model
+
+        scaled = asdict(servo_model(robot))
+        unset = {k: v for k, v in scaled.items() if getattr(self, k) is None}
+        return replace(self, **unset) if unset else self
+
 
 # ------------------------------------------------------------------------------ the model
-def _urdf_to_mjcf(urdf_path: Path) -> str:
-    """MuJoCo's import of a URDF, saved as MJCF text (fixed links kept, visuals dropped)."""
+def _urdf_to_mjcf(robot: Robot) -> tuple[str, list[str]]:
+    """MuJoCo's import of the robot's URDF (:mod:`planner.sim_robot`), saved as MJCF text.
+
+    Fixed links are kept, visuals dropped. Returns (MJCF text, what was changed in the
+    URDF to import it).
+    """
+    from planner.sim_robot import sim_robot_urdf
+
     mujoco = _mujoco()
-    try:
-        text = Path(urdf_path).read_text(encoding="utf-8")
-    except OSError as exc:
-        raise InputError(f"{urdf_path}: cannot read the robot's URDF ({exc})") from None
+    urdf_path = Path(robot.urdf_path)
+    prepared = sim_robot_urdf(robot)
     ext = (
         '<mujoco><compiler discardvisual="true" fusestatic="false" balanceinertia="true" '
-        f'strippath="false" meshdir="{Path(urdf_path).parent}"/></mujoco>'
+        f'inertiafromgeom="false" strippath="false" meshdir="{urdf_path.parent}"/></mujoco>'
     )
-    text, n = re.subn(r"(<robot\b[^>]*>)", lambda m: m.group(1) + ext, text, count=1)
+    text, n = re.subn(r"(<robot\b[^>]*>)", lambda m: m.group(1) + ext, prepared.text, count=1)
     if n != 1:
         raise InputError(f"{urdf_path}: no <robot> element; give a URDF file")
     try:
@@ -189,7 +205,7 @@ def _urdf_to_mjcf(urdf_path: Path) -> str:
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "robot.xml"
         mujoco.mj_saveLastXML(str(out), model)
-        return out.read_text(encoding="utf-8")
+        return out.read_text(encoding="utf-8"), prepared.notes
 
 
 @dataclass
@@ -286,7 +302,9 @@ def terrain_model(grid: TerrainGrid, terrain: Terrain | None = None) -> TerrainM
 
 def build_mjcf(robot: Robot, terrain: TerrainModel, friction: float, settings: SimSettings) -> str:
     """MJCF text: the URDF's robot with a free joint, servos, and the terrain (section 10)."""
-    root = ET.fromstring(_urdf_to_mjcf(robot.urdf_path))
+    text, _ = _urdf_to_mjcf(robot)
+    root = ET.fromstring(text)
+    settings = settings.for_robot(robot)
     world = root.find("worldbody")
     base = world.find("body") if world is not None else None
     if base is None:
@@ -399,7 +417,7 @@ class Simulator:
         mujoco = _mujoco()
         self.mj = mujoco
         self.robot = robot
-        self.settings = (settings or SimSettings()).check()
+        self.settings = (settings or SimSettings()).check().for_robot(robot)
         self.terrain = terrain
         self.terrain_model = terrain_model(grid, terrain)
         self.friction = float(friction)

@@ -13,12 +13,15 @@ def test_robot_summary_prints_littledog(capsys):
 def test_robot_list_names_every_loadable_robot_and_its_urdf(capsys):
     from pathlib import Path
 
-    from planner.robot import robot_names
+    from planner.robot import load_robot, robot_names
 
     assert main(["robot", "--list"]) == 0
-    lines = capsys.readouterr().out.strip().splitlines()
+    lines = capsys.readouterr().out.strip().splitlines()[1:-1]  # header and footnote out
     assert [ln.split()[0] for ln in lines] == robot_names()
-    assert all(Path(ln.split()[1]).is_file() for ln in lines)  # each URDF exists here
+    assert all(Path(ln.split()[-1]).is_file() for ln in lines)  # each URDF exists here
+    solo = next(ln for ln in lines if ln.startswith("solo12"))
+    r = load_robot("solo12")
+    assert f"{r.total_mass_kg:.2f}" in solo and "*" in solo  # its foot radius is derived
     for args, option in ((["robot"], "robot:"), (["robot", "go1", "--list"], "--list")):
         assert main(args) == 2
         err = capsys.readouterr().err.strip()
