@@ -189,6 +189,7 @@ def _source(sim: Simulator, source: StateSource | None, **noise) -> StateSource:
 # (stride fraction, Lambda_c shrink) tried in turn for one step from a measured state
 BACKOFF = ((1.0, None), (0.5, 0.5), (0.25, 0.7))
 GUIDE_FAILS = 2  # failed cycles in a row after which feedback stops following the plan's steps
+MAX_ARRIVALS = 2  # arrival moves (four feet, COM over the goal) tried from measured states
 
 
 def planned_steps(plan: Plan) -> list[tuple[int, _Array]]:
@@ -282,7 +283,6 @@ def run_feedback(
     """
     from planner.local.gait_queue import GaitQueue
     from planner.local.soft import LocalSettings, SoftPlanner
-    from planner.state import contact_mask
     from planner.trajectory import Trajectory
 
     wall0 = _time.perf_counter()
@@ -301,7 +301,7 @@ def run_feedback(
     guide_cycles = plan_step_cycles(plan) if correct_plan_steps else None
     s_plan, centres = plan.samples, plan.foot_centres_W()
     step_scale = {i: 1.0 for i in range(4)}
-    fails, cycles, steps, best, best_at = 0, 0, 0, math.inf, 0
+    fails, cycles, steps, best, best_at, arrivals = 0, 0, 0, math.inf, 0, 0
     m = ex.monitor.metrics
     try:
         while True:
@@ -326,6 +326,19 @@ def run_feedback(
                 message = f"no progress in {no_progress_cycles} cycles "
                 message += f"(COM {100 * dist:.0f} cm from goal)"
                 break
+            if arrivals < MAX_ARRIVALS:
+                # the goal inside the measured four-foot support: the planner's arrival
+                # move from here (:meth:`LocalPlanner.arrival`), instead of stepping
+                moved = local.arrival(state, goal, tau)
+                if moved is not None:
+                    arrivals += 1
+                    cycles += 1
+                    end, path = moved
+                    body_s = max(local._body_time(state, end), local._joint_time(path))
+                    if not _execute(ex, robot, sim, path, _path_times(len(path), 0, body_s, 0.0)):
+                        message = f"fell at {m.fall_time_s:.1f} s ({m.fall_reason})"
+                        break
+                    continue
             # one cycle of the soft planner (SoftPlanner._run), from the measured state
             cycles += 1
             guided = g < len(guide)
@@ -390,13 +403,7 @@ def run_feedback(
             swing = step.swing_path if step.ok else []
             path = list(step.body_path) + list(swing[1:])
             times = _path_times(len(step.body_path), len(swing), body_s, swing_s)
-            q = np.array([robot.q_from(p.base_position_W, p.base_quaternion_xyzw, p.joints_rad)
-                          for p in path])  # fmt: skip
-            contact = np.array([contact_mask(s.stratum) for s in path])
-            q = blend_in(robot, q, contact, times, sim.targets())
-            ex.monitor.keyframe(0)
-            m.cycles += 1
-            if not ex.follow(times, q, contact):
+            if not _execute(ex, robot, sim, path, times):
                 message = f"fell at {m.fall_time_s:.1f} s ({m.fall_reason})"
                 break
     except KeyboardInterrupt:
@@ -410,11 +417,28 @@ def run_feedback(
             "plan_steps": len(guide),
             "plan_steps_followed": followed,  # landed on the plan's foothold
             "plan_steps_corrected": corrected,  # the plan's own step, corrected (8.4)
+            "arrivals": arrivals,  # arrival moves executed (four feet, COM over the goal)
             "planner_solves": local.stats,
             "planner_failures": local.failures[-50:],
         }
     }
     return finish_run(plan, ex, wall0, t0, extra)
+
+
+def _execute(ex, robot, sim, path: list, times: _Array) -> bool:
+    """Follow planned states ``path`` at plan ``times`` from the current set-points (8.3).
+
+    One cycle of the monitor; False when the robot fell.
+    """
+    from planner.state import contact_mask
+
+    q = np.array([robot.q_from(p.base_position_W, p.base_quaternion_xyzw, p.joints_rad)
+                  for p in path])  # fmt: skip
+    contact = np.array([contact_mask(s.stratum) for s in path])
+    q = blend_in(robot, q, contact, times, sim.targets())
+    ex.monitor.keyframe(0)
+    ex.monitor.metrics.cycles += 1
+    return bool(ex.follow(times, q, contact))
 
 
 def _path_times(n_body: int, n_swing: int, body_s: float, swing_s: float) -> _Array:

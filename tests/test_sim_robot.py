@@ -97,3 +97,20 @@ def test_unreadable_meshes_become_the_planners_primitives():
     notes = sim_robot_urdf(load_robot("hyq")).notes
     assert any("'trunk'" in n and "body box" in n for n in notes)
     assert sum("thigh capsule" in n for n in notes) == 4
+
+
+def test_another_robot_walks_with_feedback_and_arrives_over_the_goal():
+    """A1 (13.7 kg, 37 cm legs) on flat with feedback (8.3) in MuJoCo: its steps are 13 cm,
+    so the walk ends with the arrival move from the measured state (COM over the goal)."""
+    from planner.execution import simulate_plan
+    from planner.terrain import Terrain
+    from planner.walk import plan_walk
+
+    flat = Terrain.from_spec({"name": "flat", "kind": "flat", "friction": 0.7, "length": 2.0})
+    plan, report = plan_walk("a1", flat, (0.6, 0.0), (0.0, 0.0))
+    assert plan.outcome["reached_goal"] and report.ok, plan.outcome["message"]
+    res = simulate_plan(plan, "feedback")
+    m = res.metrics
+    assert m.reached and not m.fell and not m.body_contact, m.message
+    assert m.com_to_goal_m < 0.03
+    assert res.executed.stats["feedback"]["arrivals"] >= 1
