@@ -19,7 +19,8 @@ joints find their own way:
    ``csgraph``) from the lift-off pose to the touch-down pose, each entered from a
    *pre-pose* a few millimetres up the terrain normal (IK on the same knee branch), then
    shortcut (a waypoint is dropped where the straight joint segment stays free), and
-   every segment of the result checked every ``SEGMENT_STEP_RAD``;
+   every segment of the result checked every ``SEGMENT_STEP_RAD`` / s (s: the robot's
+   length scale, :mod:`planner.robot_scale`: the foot moves as far between checks);
 4. ``n`` samples along it by joint-space arc length with a smootherstep in time (the foot
    starts and stops at rest), which is how the executor's servos interpolate anyway.
 
@@ -37,6 +38,7 @@ from planner.contact import E_Z, foot_centre_from_contact
 from planner.interpolate import smootherstep
 from planner.kinematics import kinematics_of
 from planner.links import disc_clearance, leg_links
+from planner.robot_scale import length_scale
 from planner.state import State
 
 __all__ = ["joint_space_swing"]
@@ -58,6 +60,7 @@ class _Free:
     def __init__(self, robot, terrain, state: State, leg: int):
         self.robot, self.terrain, self.leg = robot, terrain, leg
         self.links = leg_links(robot)
+        self.segment_step_rad = SEGMENT_STEP_RAD / length_scale(robot)
         self.kin = kinematics_of(robot)
         self.caps = [c for c, cap in enumerate(self.links.capsules) if cap.leg == leg]
         self.state = state
@@ -92,8 +95,8 @@ class _Free:
         return feet_B @ self.R.T + self.p
 
     def segment_free(self, a: _Array, b: _Array) -> bool:
-        """Whether the straight joint segment a-b is free (checked every SEGMENT_STEP_RAD)."""
-        m = max(2, int(np.ceil(np.abs(b - a).max() / SEGMENT_STEP_RAD)) + 1)
+        """Whether the straight joint segment a-b is free (checked every SEGMENT_STEP_RAD / s)."""
+        m = max(2, int(np.ceil(np.abs(b - a).max() / self.segment_step_rad)) + 1)
         u = np.linspace(0.0, 1.0, m)[:, None]
         return bool(np.all(self(a + u * (b - a))))
 

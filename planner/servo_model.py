@@ -24,14 +24,12 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from planner.robot_scale import REFERENCE_MASS_KG, REFERENCE_REACH_M
+
 if TYPE_CHECKING:
     from planner.robot import Robot
 
 __all__ = ["LITTLEDOG_SERVOS", "ServoModel", "servo_model"]
-
-# LittleDog's model (models/littledog): total mass [kg] and mean leg reach [m]
-REFERENCE_MASS_KG = 3.004
-REFERENCE_REACH_M = 0.1795267490
 
 
 @dataclass(frozen=True)

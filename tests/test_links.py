@@ -118,3 +118,22 @@ def test_littledog_shanks_are_not_cut_and_hyq_shanks_are(littledog):
     end_W = min((M.rotation @ e + M.translation for e in (shank.a_J, shank.b_J)),
                 key=lambda p: np.linalg.norm(p - centre))  # fmt: skip
     assert np.linalg.norm(end_W - centre) + shank.radius_m == pytest.approx(hyq.foot_radius_m)
+
+
+def test_sphere_penetration_agrees_with_the_exact_distance(rng):
+    """Foot spheres against a riser: the sampled overlap vs the validator's exact distance."""
+    from planner.contact import sphere_penetration_m
+
+    step = _course("step", x=0.8, height=0.17)
+    rho = 0.031
+    assert sphere_penetration_m(step, [[0.5, 0.0, rho]], rho)[0] == pytest.approx(0.0, abs=1e-9)
+    for _ in range(40):
+        d = rng.uniform(0.0, 0.05)  # sphere centre this far before the riser
+        z = rng.uniform(rho, 0.1)
+        c = np.array([[0.8 - d, rng.uniform(-0.2, 0.2), z]])
+        cut = sphere_penetration_m(step, c, rho)[0]
+        exact = rho - sharp_surface_distance(step, c, rho + 1e-3, 1e-4)[0]  # Euclidean depth
+        if exact > 0.1 * rho:  # into the riser (beyond the ring's sampling): seen, not less
+            assert cut >= exact - 1e-6
+        elif exact < -1e-3:  # clear by a millimetre: no overlap at any sample
+            assert cut <= 0.0

@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from planner import interrupts
+from planner.contact import sphere_penetration_m
 from planner.footholds import best_and_shortest, foothold_candidates
 from planner.heuristics import (
     EDGE_MARGIN_M,
@@ -57,6 +58,7 @@ from planner.torques import TorqueCheck
 from planner.trajectory import Trajectory
 
 BODY_CLEARANCE_M = 0.005  # least height of the body's bottom above the sharp terrain [m]
+FOOT_CUT_TOL_M = 1e-4  # a stance foot sphere may overlap the sharp terrain this much (check's)
 JOINT_SPEED_FRACTION = 0.9  # of the URDF velocity limit, the most a path asks of a joint
 LANDING_FRACTION = 1.0 / 3.0  # the last third of a swing's sample intervals ...
 LANDING_SLOWDOWN = 3.0  # ... each last this many times as long (swing_offsets_s)
@@ -762,6 +764,19 @@ class LocalPlanner:
                     f"the body passes {float(gap.min()) * 1000:.1f} mm above the terrain at "
                     f"sample {k} of the path (less than {BODY_CLEARANCE_M * 1000:.0f} mm)"
                 )
+        # stance feet roll as their shanks turn: at the path's end none rolled into an
+        # edge (a riser); a measured start may already touch one, the path no deeper
+        end, start = path[-1], path[0]
+        stance = np.flatnonzero(end.in_contact)
+        if len(stance):
+            cut = self._foot_cut_m(end, stance)
+            allowed = np.maximum(self._foot_cut_m(start, stance), 0.0) + FOOT_CUT_TOL_M
+            j = int(np.argmax(cut - allowed))
+            if cut[j] > allowed[j]:
+                return (
+                    f"the {LEG_NAMES[stance[j]]} foot rolls {cut[j] * 1000:.1f} mm into an edge "
+                    "of the terrain on the path"
+                )
         links = leg_links(self.robot)
         qs = [
             self.robot.q_from(s.base_position_W, s.base_quaternion_xyzw, s.joints_rad) for s in path
@@ -835,6 +850,12 @@ class LocalPlanner:
                     f"{100 * TORQUE_FRACTION:.0f} %)"
                 )
         return ""
+
+    def _foot_cut_m(self, state: State, legs) -> np.ndarray:
+        """How far the sharp terrain cuts into ``legs``' foot spheres at ``state`` [m]."""
+        R, p = state.base_rotation_W, state.base_position_W
+        centres = np.array([R @ self.kin.foot_B(i, state.joints_rad[i]) + p for i in legs])
+        return sphere_penetration_m(self.terrain, centres, self.robot.foot_radius_m)
 
     def path_end(self, path: list[State], support: tuple[int, ...]) -> State:
         """The last sample of a path as the keyframe it ends on (:func:`end_keyframe`).
