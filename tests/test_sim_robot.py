@@ -114,3 +114,22 @@ def test_another_robot_walks_with_feedback_and_arrives_over_the_goal():
     assert m.reached and not m.fell and not m.body_contact, m.message
     assert m.com_to_goal_m < 0.03
     assert res.executed.stats["feedback"]["arrivals"] >= 1
+
+
+def test_timing_scales_with_the_leg_unless_given(littledog):
+    """LittleDog keeps 4 cm/s and 0.6 s; ANYmal (s = 3.58) gets x sqrt(s); a given value wins."""
+    from planner.local.base import LocalSettings
+    from planner.local.soft import SoftPlanner
+    from planner.robot_scale import length_scale
+    from planner.terrain import load_terrain
+
+    flat = load_terrain("flat")
+    ld = SoftPlanner(littledog, flat).settings
+    assert (ld.body_speed_m_s, ld.swing_time_s) == (0.04, 0.6)
+    anymal = load_robot("anymal")
+    k = length_scale(anymal) ** 0.5
+    st = SoftPlanner(anymal, flat).settings
+    assert st.body_speed_m_s == pytest.approx(0.04 * k)
+    assert st.swing_time_s == pytest.approx(0.6 * k)
+    given = SoftPlanner(anymal, flat, settings=LocalSettings(swing_time_s=0.8)).settings
+    assert given.swing_time_s == 0.8 and given.body_speed_m_s == pytest.approx(0.04 * k)

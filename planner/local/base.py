@@ -57,6 +57,8 @@ from planner.state import State
 from planner.torques import TorqueCheck
 from planner.trajectory import Trajectory
 
+BODY_SPEED_M_S = 0.04  # LittleDog's body moves [m/s] (x sqrt(s) for another robot)
+SWING_TIME_S = 0.6  # LittleDog's swing [s] (x sqrt(s)), its landing third slowed
 BODY_CLEARANCE_M = 0.005  # least height of the body's bottom above the sharp terrain [m]
 FOOT_CUT_TOL_M = 1e-4  # a stance foot sphere may overlap the sharp terrain this much (check's)
 JOINT_SPEED_FRACTION = 0.9  # of the URDF velocity limit, the most a path asks of a joint
@@ -100,6 +102,8 @@ class LocalSettings:
         margin before a leg lifts); 0 is the paper.
     body_speed_m_s, swing_time_s : timing of the samples (quasi-static: slow); a swing's
         landing third is slowed (:func:`swing_weights`): it lasts 5/3 x swing_time_s.
+        None: LittleDog's ``BODY_SPEED_M_S``, ``SWING_TIME_S`` scaled to the robot by
+        dynamic similarity (x sqrt(s), :mod:`planner.robot_scale`).
     goal_tol_m : distance of the COM (xy) to the goal that counts as arrived.
     balance_margin_frac : least friction-cone margin (x m g) at every sample of a path.
     max_fails_in_row : failed step attempts in a row after which the planner is stuck.
@@ -115,8 +119,8 @@ class LocalSettings:
     clearance_m: float | None = None
     body_samples: int = 8
     swing_samples: int = 12
-    body_speed_m_s: float = 0.04
-    swing_time_s: float = 0.6
+    body_speed_m_s: float | None = None
+    swing_time_s: float | None = None
     goal_tol_m: float = 0.05
     max_cycles: int = 400
     time_budget_s: float = 120.0
@@ -237,7 +241,7 @@ class LocalPlanner:
         self.robot = robot
         self.terrain = terrain
         self.mu = float(terrain.spec.get("friction", 0.7) if mu is None else mu)
-        self.settings = settings or LocalSettings()
+        self.settings = _timed(settings or LocalSettings(), robot)
         self.kin = kinematics_of(robot)
         self._sink = False  # body targets lowered where a leg is stretched (step's back-off)
         self._hips_B = np.array([hip_point_B(lg) for lg in robot.legs])
@@ -1236,6 +1240,18 @@ class LocalPlanner:
         for s, d in zip(path[1:], dt, strict=True):
             samples.append(s)
             times.append(t0 + float(d))
+
+
+def _timed(settings: LocalSettings, robot) -> LocalSettings:
+    """``settings`` with unset timing scaled from LittleDog's (:mod:`planner.robot_scale`)."""
+    from planner.robot_scale import time_scale
+
+    k = time_scale(robot)
+    if settings.body_speed_m_s is None:
+        settings = replace(settings, body_speed_m_s=BODY_SPEED_M_S * k)
+    if settings.swing_time_s is None:
+        settings = replace(settings, swing_time_s=SWING_TIME_S * k)
+    return settings
 
 
 def swing_weights(n_intervals: int) -> NDArray[np.float64]:
