@@ -151,11 +151,12 @@ def robot_rows(jobs: Sequence[dict], records: dict[str, dict]) -> list[dict]:
     return rows
 
 
-def _cell(v: Any, fmt: str = "{}") -> str:
+def _cell(v: Any, fmt: str = "{}", bad: bool = False) -> str:
+    """A table cell; a boolean in bold when it is the bad outcome (``bad``)."""
     if v is None:
         return "-"
     if isinstance(v, bool):
-        return "yes" if v else "**no**"
+        return ("**yes**" if bad else "yes") if v else ("no" if bad else "**no**")
     return fmt.format(v)
 
 
@@ -187,7 +188,7 @@ def render_markdown(result: dict[str, Any]) -> str:
             f"| {r['robot']} | {r['course']} | {_cell(r['reached'])} | {_cell(r['check_ok'])} "
             f"| {_cell(r['steps'])} | {_cell(r['planning_time_s'], '{:.1f}')} "
             f"| {_cell(r['walk_time_s'], '{:.0f}')} | {_cell(r['walk_speed_cm_s'], '{:.1f}')} "
-            f"| {fb_cell} | {_cell(r['feedback_fell'])} |"
+            f"| {fb_cell} | {_cell(r['feedback_fell'], bad=True)} |"
         )
     s = result["summary"]
     lines += [
@@ -203,8 +204,8 @@ def render_markdown(result: dict[str, Any]) -> str:
             why = r.get("message", "") if not r.get("reached") else r.get("feedback_message", "")
             lines.append(f"- {r['robot']} {r['course']}: {why}")
     m = result["machine"]
-    lines += ["", f"Machine: {m.get('cpu', '?')}, {m.get('cores', '?')} cores; "
-              f"total {result['total_time_s']:.0f} s.", ""]  # fmt: skip
+    lines += ["", f"Machine: {m.get('cpu', '?')}, {m.get('nproc', '?')} cores, commit "
+              f"{m.get('git_commit', '?')}; total {result['total_time_s']:.0f} s.", ""]  # fmt: skip
     return "\n".join(lines)
 
 
