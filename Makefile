@@ -24,7 +24,8 @@ test: $(STAMP)
 # physics: 9 courses + 20 generated, plan then MuJoCo open/feedback/correct at time scale 1;
 #   ~90 min on 2 cores (a 2 m plan takes 30-60 s since the rolling feet; see the README);
 #   ladder: one feature per course at growing sizes, the limits table (~20 min);
-#   speed: planning time per course (median of 5), where it goes, flat 1-8 m (~10 min)
+#   speed: planning time per course (median of 5), where it goes, flat 1-8 m (~10 min);
+#   robots: every robot of the list on flat, rough and step courses scaled to it (~15 min)
 bench: $(STAMP)
 	$(VENV)/bin/stratawalk bench theta --jit
 	$(VENV)/bin/stratawalk bench courses
@@ -32,6 +33,7 @@ bench: $(STAMP)
 	$(VENV)/bin/stratawalk bench physics --courses ladder --generated 0 --modes open,feedback \
 		--planned-only --time-budget 120 --out bench/results/ladder
 	$(VENV)/bin/stratawalk bench speed
+	$(VENV)/bin/stratawalk bench robots
 
 # every command fed generated bad input (hypothesis), 20x the cases of make test (~6,600,
 # a fresh seed each run): never a traceback, never a hang; ~6 min on 2 cores
