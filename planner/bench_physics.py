@@ -322,14 +322,13 @@ def ladder_limits(rows: Sequence[dict]) -> dict[str, Any]:
     :data:`planner.course_gen.LADDER`, steps and stairs split into up and down; sizes are
     magnitudes in the ladder's units.
     """
-    from planner.course_gen import LADDER_UNITS
+    from planner.course_gen import LADDER_UNITS, parse_feature_name
 
     out: dict[str, Any] = {}
     for r in rows:
         if r.get("group") != "ladder":
             continue
-        _, kind, text = r["course"].split(":")
-        size = float(text)
+        kind, size = parse_feature_name(r["course"])
         family = f"{kind} {'up' if size > 0 else 'down'}" if kind in ("step", "stairs") else kind
         entry = out.setdefault(family, {"unit": LADDER_UNITS.get(kind, ""), "sizes": {}})
         cell = entry["sizes"].setdefault(abs(size), {"planned": bool(r.get("planned"))})

@@ -65,6 +65,7 @@ __all__ = [
     "feature_course",
     "feature_course_name",
     "ladder_course_names",
+    "parse_feature_name",
     "generate_course",
     "generated_course_names",
     "parse_course_name",
@@ -472,6 +473,26 @@ def ladder_course_names() -> list[str]:
     return [feature_course_name(k, v) for k, sizes in LADDER.items() for v in sizes]
 
 
+def parse_feature_name(name: str) -> tuple[str, float] | None:
+    """(KIND, SIZE) of a ``feat:KIND:SIZE`` name; None for any other name.
+
+    Raises InputError (one line naming the course) for a malformed ``feat:`` name.
+    """
+    text = str(name)
+    if not text.startswith(_FEAT + ":"):
+        return None
+    parts = text.split(":")
+    try:
+        if len(parts) != 3:
+            raise ValueError
+        return parts[1], float(parts[2])
+    except ValueError:
+        raise InputError(
+            f"course '{name}': expected feat:KIND:SIZE (KIND one of {', '.join(LADDER)}, "
+            "SIZE a number)"
+        ) from None
+
+
 def course_spec(name: str) -> dict | None:
     """The spec of a ``gen:...`` or ``feat:KIND:SIZE`` name; None for any other name.
 
@@ -482,17 +503,14 @@ def course_spec(name: str) -> dict | None:
 
     """
     text = str(name)
-    if text.startswith(_FEAT + ":"):
-        parts = text.split(":")
+    feature = parse_feature_name(text)
+    if feature is not None:
         try:
-            if len(parts) != 3:
-                raise ValueError
-            return feature_course(parts[1], float(parts[2]))
-        except (ValueError, InputError) as exc:
-            hint = f": {exc}" if isinstance(exc, InputError) else ""
+            return feature_course(*feature)
+        except InputError as exc:
             raise InputError(
                 f"course '{name}': expected feat:KIND:SIZE (KIND one of {', '.join(LADDER)}, "
-                f"SIZE a number){hint}"
+                f"SIZE a number): {exc}"
             ) from None
     parsed = parse_course_name(text)
     if parsed is None:
