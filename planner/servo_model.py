@@ -12,8 +12,8 @@ sqrt(L / g) and masses with M, so
 - a damping (torque per rad/s) with M L sqrt(g L): the same damping ratio;
 - an inertia with M L^2.
 
-A 30 kg ANYmal (L 0.64 m) gets 20 x 10.2 x 3.6 = 730 N m/rad; a 2.2 kg Solo12 (L 0.33 m)
-27 N m/rad. The effort limits stay the URDF's (what the motors give): a robot whose limits
+ANYmal C (52.1 kg, L 0.64 m) gets 20 x 17.4 x 3.58 = 1244 N m/rad; Solo12 (2.5 kg,
+L 0.33 m) 30 N m/rad. The effort limits stay the URDF's (what the motors give): a robot whose limits
 are small next to M g L saturates, as it would. Explicit values in ``SimSettings`` win.
 """
 
