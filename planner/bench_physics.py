@@ -518,6 +518,34 @@ def _run_pool(jobs: list[dict], workers: int) -> Iterable[dict]:
     return run_pool(run_physics_job, jobs, workers, _failed_record)
 
 
+def run_jobs(jobs: list[dict], path: Path, workers: int, progress: bool = True) -> bool:
+    """Run the jobs not yet finished without error in the JSONL ``path``; True if Ctrl-C.
+
+    Records are appended to ``path`` as they finish (a pool of spawned processes).
+    """
+    from planner.batch import _Progress, _Writer, read_results
+
+    done = {k: v for k, v in read_results(path).items() if v.get("status") == "ok"}
+    todo = [j for j in jobs if job_id(j) not in done]
+    writer = _Writer(path, None)
+    bar = _Progress(len(todo), len(jobs) - len(todo), enabled=progress)
+    try:
+        if todo:
+            stream = _run_pool(todo, max(1, min(workers, len(todo))))
+            try:
+                for rec in stream:
+                    writer.write(rec)
+                    bar.update(rec)
+            finally:
+                stream.close()
+    except KeyboardInterrupt:
+        return True
+    finally:
+        bar.close()
+        writer.close()
+    return False
+
+
 def run_physics_bench(
     courses: Sequence[str] = COURSES,
     generated: int = GENERATED,
@@ -539,7 +567,7 @@ def run_physics_bench(
     Without ``resume`` an old ``physics.jsonl`` is replaced; with it, jobs finished without
     error are kept and only the others run. Returns the content of ``physics.json``.
     """
-    from planner.batch import _Progress, _Writer, read_results
+    from planner.batch import read_results
     from planner.machine import machine_info
 
     out = Path(out_dir)
@@ -561,27 +589,9 @@ def run_physics_bench(
         first_seed=first_seed,
         planned_only=planned_only,
     )
-    done = {k: v for k, v in read_results(path).items() if v.get("status") == "ok"}
-    todo = [j for j in jobs if job_id(j) not in done]
     machine = machine_info()
     t0 = time.perf_counter()
-    writer = _Writer(path, None)
-    bar = _Progress(len(todo), len(jobs) - len(todo), enabled=progress)
-    interrupted = False
-    try:
-        if todo:
-            stream = _run_pool(todo, max(1, min(workers, len(todo))))
-            try:
-                for rec in stream:
-                    writer.write(rec)
-                    bar.update(rec)
-            finally:
-                stream.close()
-    except KeyboardInterrupt:
-        interrupted = True
-    finally:
-        bar.close()
-        writer.close()
+    interrupted = run_jobs(jobs, path, workers, progress)
     config = {
         "robot": "littledog",
         "planner": "soft",

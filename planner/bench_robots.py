@@ -230,8 +230,8 @@ def run_robots_bench(
     progress: bool = True,
 ) -> dict[str, Any]:
     """Run the jobs and write ``robots.{jsonl,json,md}`` to ``out_dir``; the JSON's content."""
-    from planner.batch import _clean, _Progress, _Writer, read_results
-    from planner.bench_physics import _run_pool, job_id
+    from planner.batch import _clean, read_results
+    from planner.bench_physics import run_jobs
     from planner.machine import machine_info
     from planner.outputs import write_atomic
     from planner.robot import robot_names
@@ -244,26 +244,8 @@ def run_robots_bench(
         path.unlink()
     plans_dir = (out / "robot_plans").resolve() if save_plans else None
     jobs = robot_jobs(robots, kinds, time_budget_s, out, plans_dir)
-    done = {k: v for k, v in read_results(path).items() if v.get("status") == "ok"}
-    todo = [j for j in jobs if job_id(j) not in done]
     t0 = time.perf_counter()
-    writer = _Writer(path, None)
-    bar = _Progress(len(todo), len(jobs) - len(todo), enabled=progress)
-    interrupted = False
-    try:
-        if todo:
-            stream = _run_pool(todo, max(1, min(workers, len(todo))))
-            try:
-                for rec in stream:
-                    writer.write(rec)
-                    bar.update(rec)
-            finally:
-                stream.close()
-    except KeyboardInterrupt:
-        interrupted = True
-    finally:
-        bar.close()
-        writer.close()
+    interrupted = run_jobs(jobs, path, workers, progress)
     rows = robot_rows(jobs, read_results(path))
     result = _clean(
         {
