@@ -334,8 +334,8 @@ def run_feedback(
                     arrivals += 1
                     cycles += 1
                     end, path = moved
-                    body_s = max(local._body_time(state, end), local._joint_time(path))
-                    if not _execute(ex, robot, sim, path, _path_times(len(path), 0, body_s, 0.0)):
+                    times = np.concatenate([[0.0], local.body_offsets_s(path)])
+                    if not _execute(ex, robot, sim, path, times):
                         message = f"fell at {m.fall_time_s:.1f} s ({m.fall_reason})"
                         break
                     continue
@@ -399,10 +399,9 @@ def run_feedback(
                 local._log_failure(cycles, leg, step.phase, where, step.diagnosis)
             if step.moved is None:
                 continue  # the body move failed: nothing to execute
-            body_s, swing_s = local.durations(step)  # the planner's own timing
             swing = step.swing_path if step.ok else []
             path = list(step.body_path) + list(swing[1:])
-            times = _path_times(len(step.body_path), len(swing), body_s, swing_s)
+            times = local.step_times_s(step)  # the planner's own time law
             if not _execute(ex, robot, sim, path, times):
                 message = f"fell at {m.fall_time_s:.1f} s ({m.fall_reason})"
                 break
@@ -439,16 +438,6 @@ def _execute(ex, robot, sim, path: list, times: _Array) -> bool:
     ex.monitor.keyframe(0)
     ex.monitor.metrics.cycles += 1
     return bool(ex.follow(times, q, contact))
-
-
-def _path_times(n_body: int, n_swing: int, body_s: float, swing_s: float) -> _Array:
-    """Plan times of a body path (n_body samples over body_s) then a swing (over swing_s)."""
-    from planner.local.base import swing_offsets_s
-
-    t = list(np.linspace(0.0, body_s, n_body)) if n_body > 1 else [0.0]
-    if n_swing > 1:
-        t += list(body_s + swing_offsets_s(n_swing, swing_s))  # the planner's landing
-    return np.array(t)
 
 
 # ------------------------------------------------------------------------------ 8.4

@@ -7,8 +7,9 @@ file (``stratawalk plan --config settings.yaml``) holds any of them::
 
     mu: 0.5                 # friction coefficient (the terrain file's otherwise)
     step_m: 0.05            # stride of Lambda_t [m]
-    body_speed_m_s: 0.03    # body moves [m/s]
-    swing_time_s: 0.8       # one swing [s]
+    body_speed_m_s: 0.03    # body moves, peak speed [m/s]
+    body_accel_m_s2: 0.5    # body moves, acceleration bound [m/s^2]
+    swing_time_s: 0.8       # least duration of a swing [s]
     clearance_m: 0.03       # swing height: the foot's lift above the terrain [m]
     theta.clearance_m: 0.03 # body clearance: the body box above the terrain [m]
     gait: [HL, FL, HR, FR]  # the crawl's leg order
@@ -50,8 +51,12 @@ class Setting:
 SETTINGS: tuple[Setting, ...] = (
     Setting("mu", "--mu", "float", "friction coefficient (overrides the terrain's)", 0.0, 5.0),
     Setting("step_m", "--step", "float", "stride of Lambda_t [m] (0.35 x leg reach)", 0.0, 1.0),
-    Setting("body_speed_m_s", "--body-speed", "float", "speed of body moves [m/s]", 0.0, 1.0),
-    Setting("swing_time_s", "--swing-time", "float", "swing [s] (x 5/3: slow landing)", 0.0, 60.0),
+    Setting("body_speed_m_s", "--body-speed", "float", "peak speed of body moves [m/s]", 0.0, 1.0),
+    Setting(
+        "body_accel_m_s2", "--body-accel", "float",
+        "acceleration bound of body moves [m/s^2] (quasi-static)", 0.0, 10.0,
+    ),
+    Setting("swing_time_s", "--swing-time", "float", "least duration of a swing [s]", 0.0, 60.0),
     Setting("clearance_m", "--swing-height", "float", "swing height over the terrain [m]", 0, 0.5),
     Setting(
         "theta.clearance_m", "--body-clearance", "float",
@@ -177,6 +182,7 @@ def effective(planner: Any, seed: int = 1) -> dict:
         "mu": float(planner.mu),
         "step_m": float(planner.stride_m()),
         "body_speed_m_s": float(loc.body_speed_m_s),
+        "body_accel_m_s2": float(loc.body_accel_m_s2),
         "swing_time_s": float(loc.swing_time_s),
         "clearance_m": float(loc.clearance_m or default_clearance_m(planner.robot)),
         "theta.clearance_m": float(loc.theta.clearance_m),

@@ -117,19 +117,31 @@ def test_another_robot_walks_with_feedback_and_arrives_over_the_goal():
 
 
 def test_timing_scales_with_the_leg_unless_given(littledog):
-    """LittleDog keeps 4 cm/s and 0.6 s; ANYmal (s = 3.58) gets x sqrt(s); a given value wins."""
-    from planner.local.base import LocalSettings
+    """LittleDog keeps its time law's numbers; ANYmal (s = 3.58) gets speeds and times
+    x sqrt(s) and the same accelerations (the same Froude number); a given value wins."""
+    from planner.local.base import (
+        BODY_ACCEL_M_S2,
+        BODY_SPEED_M_S,
+        SWING_TIME_S,
+        LocalSettings,
+    )
     from planner.local.soft import SoftPlanner
     from planner.robot_scale import length_scale
     from planner.terrain import load_terrain
 
     flat = load_terrain("flat")
     ld = SoftPlanner(littledog, flat).settings
-    assert (ld.body_speed_m_s, ld.swing_time_s) == (0.04, 0.6)
+    assert (ld.body_speed_m_s, ld.body_accel_m_s2, ld.swing_time_s) == (
+        BODY_SPEED_M_S,
+        BODY_ACCEL_M_S2,
+        SWING_TIME_S,
+    )
     anymal = load_robot("anymal")
     k = length_scale(anymal) ** 0.5
     st = SoftPlanner(anymal, flat).settings
-    assert st.body_speed_m_s == pytest.approx(0.04 * k)
-    assert st.swing_time_s == pytest.approx(0.6 * k)
+    assert st.body_speed_m_s == pytest.approx(BODY_SPEED_M_S * k)
+    assert st.swing_time_s == pytest.approx(SWING_TIME_S * k)
+    assert st.body_accel_m_s2 == BODY_ACCEL_M_S2
     given = SoftPlanner(anymal, flat, settings=LocalSettings(swing_time_s=0.8)).settings
-    assert given.swing_time_s == 0.8 and given.body_speed_m_s == pytest.approx(0.04 * k)
+    assert given.swing_time_s == 0.8
+    assert given.body_speed_m_s == pytest.approx(BODY_SPEED_M_S * k)

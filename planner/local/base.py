@@ -57,14 +57,15 @@ from planner.state import State
 from planner.torques import TorqueCheck
 from planner.trajectory import Trajectory
 
-BODY_SPEED_M_S = 0.04  # LittleDog's body moves [m/s] (x sqrt(s) for another robot)
-SWING_TIME_S = 0.6  # LittleDog's swing [s] (x sqrt(s)), its landing third slowed
+# the time law (planner.time_law), chosen from MuJoCo runs at time scale 1 (issue 16):
+BODY_SPEED_M_S = 0.25  # LittleDog's body moves, peak [m/s] (x sqrt(s) for another robot)
+# ... their acceleration bound [m/s^2], lower where the stance cannot carry it: the 10 cm
+# climb (tests/test_climb.py) slid and fell open loop at 1.0 and 1.5 (its body overshot a
+# fast move by 2 cm before a swing), and was executed as planned at 0.5
+BODY_ACCEL_M_S2 = 0.5
+SWING_TIME_S = 0.25  # LittleDog's least swing [s] (x sqrt(s))
 BODY_CLEARANCE_M = 0.005  # least height of the body's bottom above the sharp terrain [m]
 FOOT_CUT_TOL_M = 1e-4  # a stance foot sphere may overlap the sharp terrain this much (check's)
-JOINT_SPEED_FRACTION = 0.9  # of the URDF velocity limit, the most a path asks of a joint
-LANDING_FRACTION = 1.0 / 3.0  # the last third of a swing's sample intervals ...
-LANDING_SLOWDOWN = 3.0  # ... each last this many times as long (swing_offsets_s)
-OVER_EDGE_SPEED_FRACTION = 0.4  # ... in a swing searched in joint space around an edge
 KNEE_CHOICE_CLEARANCE_M = 0.015  # a landing whose links are nearer an edge than this ...
 KNEE_CHOICE_GAIN_M = 0.01  # ... takes the other knee branch if it is this much clearer
 KNEE_CHOICE_EDGE_M = 0.06  # ... next to an edge this much higher than the foothold
@@ -100,10 +101,11 @@ class LocalSettings:
     step_m : stride of Lambda_t; default 0.35 x leg reach (6.3 cm for LittleDog).
     shrink : Lambda_c's pull from the support centroid toward its incentre (stability
         margin before a leg lifts); 0 is the paper.
-    body_speed_m_s, swing_time_s : timing of the samples (quasi-static: slow); a swing's
-        landing third is slowed (:func:`swing_weights`): it lasts 5/3 x swing_time_s.
-        None: LittleDog's ``BODY_SPEED_M_S``, ``SWING_TIME_S`` scaled to the robot by
-        dynamic similarity (x sqrt(s), :mod:`planner.robot_scale`).
+    body_speed_m_s, body_accel_m_s2, swing_time_s : the time law of the samples
+        (:mod:`planner.time_law`): the base's peak speed and acceleration in body moves,
+        the least duration of a swing. None: LittleDog's ``BODY_SPEED_M_S``,
+        ``BODY_ACCEL_M_S2``, ``SWING_TIME_S``, scaled to the robot by dynamic similarity
+        (speeds and times x sqrt(s), accelerations alike, :mod:`planner.robot_scale`).
     goal_tol_m : distance of the COM (xy) to the goal that counts as arrived.
     balance_margin_frac : least friction-cone margin (x m g) at every sample of a path.
     max_fails_in_row : failed step attempts in a row after which the planner is stuck.
@@ -120,6 +122,7 @@ class LocalSettings:
     body_samples: int = 8
     swing_samples: int = 12
     body_speed_m_s: float | None = None
+    body_accel_m_s2: float | None = None
     swing_time_s: float | None = None
     goal_tol_m: float = 0.05
     max_cycles: int = 400
@@ -200,11 +203,12 @@ class Walk:
         p = self.planner
         if step.moved is None:
             return
-        body_s, swing_s = p.durations(step)
-        p._append(self.samples, self.times, step.body_path, body_s)
+        t = self.times[-1] + p.step_times_s(step)
+        n_body = max(len(step.body_path) - 1, 0)
+        p._append(self.samples, self.times, step.body_path, t[1 : 1 + n_body])
         self.keyframes.append(step.moved)
         if step.ok:
-            p._append(self.samples, self.times, step.swing_path, swing_s, landing=True)
+            p._append(self.samples, self.times, step.swing_path, t[1 + n_body :])
             self.keyframes += [p._swing_keyframe(step.swing_path, step.leg, p.check), step.end]
             self.steps += 1
 
@@ -641,7 +645,7 @@ class LocalPlanner:
         path = joint_space_swing(
             self.robot, self.terrain, lifted, touch, 2 * self.settings.swing_samples, leg
         )
-        for sample in path or ():  # it passes an edge closely: slower (see _joint_time)
+        for sample in path or ():  # it passes an edge closely: slower (planner.time_law)
             sample.info["over_edge"] = True
         why = "no path in the leg's joint space" if path is None else self.path_problem(path)
         self._count("swing_joint_space", not why)
@@ -1173,73 +1177,144 @@ class LocalPlanner:
         mid.forces_W = None if eq.degenerate else eq.forces
         return mid
 
-    def _body_time(self, a: State, b: State) -> float:
-        d = float(np.linalg.norm(b.base_position_W - a.base_position_W))
-        return max(d / self.settings.body_speed_m_s, 0.2)
+    def body_offsets_s(self, path: list[State]) -> NDArray[np.float64]:
+        """Times [s] of a body path's samples 1.. after its first (:mod:`planner.time_law`).
 
-    def durations(self, step: Step) -> tuple[float, float]:
-        """Durations [s] of a step's body move and swing.
-
-        ``body_speed_m_s`` and ``swing_time_s`` (with the slowed landing of
-        :func:`swing_weights`), longer where a joint would pass its share of its speed
-        limit (:meth:`_joint_time`). The executor (8.3) uses the same.
+        The base accelerates at most ``body_accel_m_s2``, less where the stance cannot
+        carry the inertial force with ``CARRIED_SHARE`` of its friction-cone margin to
+        spare (:meth:`_carried_margin_N`); each interval is checked at its bound in the
+        direction the law accelerates it, again if the law changes.
         """
-        body_s = self._body_time(step.start, step.moved) if step.moved is not None else 0.0
-        body_s = max(body_s, self._joint_time(step.body_path))
-        over_edge = any(sample.info.get("over_edge") for sample in step.swing_path)
-        fraction = OVER_EDGE_SPEED_FRACTION if over_edge else JOINT_SPEED_FRACTION
-        w = swing_weights(len(step.swing_path) - 1)
-        plain_s = self.settings.swing_time_s * w.sum() / max(len(w), 1)  # with the landing
-        swing_s = max(plain_s, self._joint_time(step.swing_path, fraction, w))
-        return body_s, swing_s
+        from planner.time_law import body_profile, carried_accel_m_s2
 
-    def _joint_time(
-        self, path: list[State], fraction: float = JOINT_SPEED_FRACTION, weights=None
-    ) -> float:
-        """Least duration [s] of a path within the joints' speed.
-
-        The path's intervals last in proportion to ``weights`` (None: evenly in time).
-
-        Every joint moves at most ``fraction`` of its URDF velocity limit between two
-        samples. Measured: flat walks at the default timing ask up to 0.92 of LittleDog's
-        limits (HR knee, in swings) and MuJoCo tracks them; a joint-space swing that flips a
-        knee (3 rad) in the plain 0.6 s asked 1.3x and the servos lagged 92 degrees. A
-        joint-space swing passes an edge by millimetres, less than the servos' lag at 0.9
-        of the limit (barrier75mm open loop: a hind foot swung over the barrier in 1 s, the
-        joints lagged up to 14 degrees and the foot caught the barrier): those go at
-        ``OVER_EDGE_SPEED_FRACTION``. Joints without a limit in the URDF are not bound.
-        """
         if len(path) < 2:
-            return 0.0
+            return np.zeros(0)
+        st = self.settings
+        bound = np.full(len(path) - 1, float(st.body_accel_m_s2))
+        checked = np.zeros((len(bound), 2))  # magnitude verified, accelerating / braking
+        margin = self._carried_margin_N(path)
+        while True:
+            dt, acc = body_profile(
+                np.array([s.base_position_W for s in path]),
+                [s.base_rotation_W for s in path],
+                np.array([s.joints_rad.ravel() for s in path]),
+                speed_m_s=st.body_speed_m_s,
+                accel_m_s2=bound,
+                arm_m=self._hip_arm_m(),
+                vmax_rad_s=self._joint_speed_limits(),
+            )
+            todo = [
+                (k, int(a < 0.0))
+                for k, a in enumerate(acc)
+                if abs(a) > checked[k, int(a < 0.0)] * (1 + 1e-9)
+            ]
+            if not todo:
+                return np.cumsum(dt)
+            for k, braking in todo:
+                sign = -1.0 if braking else 1.0
+                bound[k] = carried_accel_m_s2(
+                    lambda a, k=k, sign=sign: margin(k, sign * a), bound[k], 0.0
+                )
+                checked[k, braking] = bound[k]
+
+    def _carried_margin_N(self, path: list[State]):
+        """margin(k, a): how far a body path's interval k carries accelerating by ``a``.
+
+        The least, over the interval's two samples, of the friction-cone margin [N] on the
+        contact feet with gravity g - a u (u the COM's direction over the interval;
+        d'Alembert's inertial force, eq. 4), minus the margin that must remain: the
+        path's own (``balance_margin_frac``) or ``CARRIED_SHARE`` of the sample's static
+        margin, whichever is more. >= 0: the stance carries the motion.
+        """
+        from planner.statics import GRAVITY_W, static_feasibility
+        from planner.time_law import CARRIED_SHARE
+
+        m = self.robot.total_mass_kg
+        need = self.settings.balance_margin_frac * m * 9.81
+        g_W = np.asarray(GRAVITY_W, float)
+        com = np.array([self.check.com_W(s) for s in path])
+        d = np.diff(com, axis=0)
+        u = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
+        normals = [self.terrain.normal(s.feet_W) for s in path]
+
+        def raw(j: int, g) -> float:
+            s = path[j]
+            res = static_feasibility(
+                s.feet_W, com[j], m, np.flatnonzero(s.in_contact), self.mu, normals[j], g,
+                with_com_margin=False,
+            )  # fmt: skip
+            return float(res.margin_N) if np.isfinite(res.margin_N) else -np.inf
+
+        floors: dict[int, float] = {}
+
+        def margin(k: int, a: float) -> float:
+            out = np.inf
+            for j in (k, k + 1):
+                if j not in floors:
+                    floors[j] = max(need, CARRIED_SHARE * raw(j, g_W))
+                out = min(out, raw(j, g_W - a * u[k]) - floors[j])
+            return out
+
+        return margin
+
+    def swing_offsets_s(self, path: list[State], leg: int) -> NDArray[np.float64]:
+        """Times [s] of a swing's samples 1.. after its first (:mod:`planner.time_law`).
+
+        A swing searched in joint space around an edge (``over_edge``) moves its joints at
+        ``OVER_EDGE_SPEED_FRACTION`` of their limits.
+        """
+        from planner.robot_scale import time_scale
+        from planner.time_law import (
+            FOOT_ACCEL_M_S2,
+            FOOT_SPEED_M_S,
+            JOINT_SPEED_FRACTION,
+            LANDING_SPEED_M_S,
+            OVER_EDGE_SPEED_FRACTION,
+            swing_durations_s,
+        )
+
+        if len(path) < 2:
+            return np.zeros(0)
+        over_edge = any(sample.info.get("over_edge") for sample in path)
+        k = time_scale(self.robot)
+        dt = swing_durations_s(
+            np.array([s.feet_W[leg] for s in path]),
+            np.array([s.joints_rad.ravel() for s in path]),
+            foot_speed_m_s=FOOT_SPEED_M_S * k,
+            landing_speed_m_s=LANDING_SPEED_M_S * k,
+            foot_accel_m_s2=FOOT_ACCEL_M_S2,
+            least_s=self.settings.swing_time_s,
+            vmax_rad_s=self._joint_speed_limits(),
+            fraction=OVER_EDGE_SPEED_FRACTION if over_edge else JOINT_SPEED_FRACTION,
+        )
+        return np.cumsum(dt)
+
+    def step_times_s(self, step: Step) -> NDArray[np.float64]:
+        """Times [s] of a step's body-path samples then its swing's (their shared sample once).
+
+        From 0 at the step's start; the executor (8.3) follows a step at these times too.
+        """
+        body = self.body_offsets_s(step.body_path) if step.moved is not None else np.zeros(0)
+        swing = self.swing_offsets_s(step.swing_path, step.leg) if step.ok else np.zeros(0)
+        end = body[-1] if len(body) else 0.0
+        return np.concatenate([[0.0], body, end + swing])
+
+    def _joint_speed_limits(self) -> NDArray[np.float64] | None:
+        """The URDF's velocity limits of the 12 leg joints [rad/s] (None where none is set)."""
         vmax = np.asarray(self.robot.model.velocityLimit, float)[-12:]
-        ok = np.isfinite(vmax) & (vmax > 0)
-        if not ok.any():
-            return 0.0
-        th = np.array([s.joints_rad.ravel() for s in path])
-        w = np.ones(len(path) - 1) if weights is None else np.asarray(weights, float)
-        per = np.abs(np.diff(th, axis=0))[:, ok] / (fraction * vmax[ok])  # least s per interval
-        return float((per.max(axis=1) / w).max() * w.sum())
+        return vmax if len(vmax) == 12 else None
+
+    def _hip_arm_m(self) -> float:
+        """Mean horizontal distance of the hips from the base [m] (a turn's lever)."""
+        hips = np.array([leg.points_B[0] for leg in self.robot.legs])
+        return float(np.mean(np.linalg.norm(hips[:, :2], axis=1)))
 
     @staticmethod
-    def _append(
-        samples: list, times: list, path: list, duration_s: float, landing: bool = False
-    ) -> None:
-        """Append a path's samples after the first (equal to the last sample) with times.
-
-        Evenly in time, or (``landing``: a swing) by :func:`swing_offsets_s`.
-        """
-        if len(path) < 2:
-            return
-        t0 = times[-1]
-        k = len(path) - 1
-        dt = (
-            swing_offsets_s(len(path), duration_s)
-            if landing
-            else duration_s * np.arange(1, k + 1) / k
-        )
-        for s, d in zip(path[1:], dt, strict=True):
+    def _append(samples: list, times: list, path: list, at_s) -> None:
+        """Append a path's samples after the first (equal to the last sample) at times ``at_s``."""
+        for s, t in zip(path[1:], at_s, strict=True):
             samples.append(s)
-            times.append(t0 + float(d))
+            times.append(float(t))
 
 
 def _timed(settings: LocalSettings, robot) -> LocalSettings:
@@ -1249,33 +1324,11 @@ def _timed(settings: LocalSettings, robot) -> LocalSettings:
     k = time_scale(robot)
     if settings.body_speed_m_s is None:
         settings = replace(settings, body_speed_m_s=BODY_SPEED_M_S * k)
+    if settings.body_accel_m_s2 is None:
+        settings = replace(settings, body_accel_m_s2=BODY_ACCEL_M_S2)
     if settings.swing_time_s is None:
         settings = replace(settings, swing_time_s=SWING_TIME_S * k)
     return settings
-
-
-def swing_weights(n_intervals: int) -> NDArray[np.float64]:
-    """Relative durations of a swing's sample intervals: its landing is slowed down.
-
-    The last ``LANDING_FRACTION`` of the intervals last ``LANDING_SLOWDOWN`` times as long
-    as the others (beyond the paper, which leaves the timing open). Measured in MuJoCo at
-    the plan's timing (time scale 1): open-loop drift came from the landings. The swing
-    samples follow a smootherstep, yet the servos lag them (up to 4-12 degrees) and the foot
-    lands with speed; on rough relief one such landing turned the body 7 degrees (gen:1)
-    and the walk ended 10.9 cm off. Slowing all swings 3x brought gen:1 and gen:5 to
-    2.7 and 2.0 cm, slowing the body moves 3x did not (9.4 cm), the lift-off third 3x did
-    not (11.7, 6.9 cm), the landing third 3x did (4.2, 1.8 cm), 2x only partly (6.9, 1.8).
-    """
-    w = np.ones(max(int(n_intervals), 0))
-    if len(w):
-        w[len(w) - max(1, round(len(w) * LANDING_FRACTION)) :] = LANDING_SLOWDOWN
-    return w
-
-
-def swing_offsets_s(n_samples: int, duration_s: float) -> NDArray[np.float64]:
-    """Times [s] of a swing's samples 1..n-1 after its first, over ``duration_s``."""
-    w = swing_weights(int(n_samples) - 1)
-    return duration_s * np.cumsum(w) / w.sum() if len(w) else np.zeros(0)
 
 
 __all__ = [
@@ -1284,6 +1337,4 @@ __all__ = [
     "LocalSettings",
     "Step",
     "Walk",
-    "swing_offsets_s",
-    "swing_weights",
 ]
