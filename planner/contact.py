@@ -276,8 +276,6 @@ def sphere_penetration_m(terrain, centres_W: ArrayLike, radius_m: float) -> _Arr
     ]
     off = np.array(offsets)
     off[0, 2] = rho
-    x = c[:, 0:1] + off[None, :, 0]
-    y = c[:, 1:2] + off[None, :, 1]
     under = c[:, 2:3] - off[None, :, 2]
-    h = np.asarray(terrain.height_sharp(x.ravel(), y.ravel()), float).reshape(x.shape)
+    h = terrain.height_sharp_offsets(c[:, 0], c[:, 1], off[:, 0], off[:, 1])
     return (h - under).max(axis=1)

@@ -284,7 +284,7 @@ def body_clearance_height_m(
     u, v = np.meshgrid(np.linspace(lo[0], hi[0], nu), np.linspace(lo[1], hi[1], nv))
     face_B = np.column_stack([u.ravel(), v.ravel(), np.full(u.size, lo[2])])
     off = face_B @ R.T  # the bottom face's points from the origin, world axes
-    top = np.asarray(terrain.height_sharp(float(xy[0]) + off[:, 0], float(xy[1]) + off[:, 1]))
+    top = terrain.height_sharp_offsets(float(xy[0]), float(xy[1]), off[:, 0], off[:, 1])[0]
     return float(np.max(top - off[:, 2])) + BODY_TARGET_CLEARANCE_M
 
 
@@ -464,7 +464,7 @@ def foothold_hazard(
     n = int(np.ceil(half / HAZARD_GRID_M))
     u = np.arange(-n, n + 1) * HAZARD_GRID_M
     X, Y = np.meshgrid(p[0] + u, p[1] + u, indexing="xy")
-    H = np.asarray(terrain.height_sharp(X, Y), float)
+    H = terrain.height_sharp_offsets(p[0] + u, np.full(len(u), p[1]), 0.0, u).T
     R = np.hypot(X - p[0], Y - p[1])
     steep_x = np.abs(np.diff(H, axis=1)) > mu * HAZARD_GRID_M
     steep_y = np.abs(np.diff(H, axis=0)) > mu * HAZARD_GRID_M

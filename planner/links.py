@@ -380,10 +380,12 @@ def disc_clearance(terrain, points_W: _Array, radius_m) -> _Array:
     pts = np.asarray(points_W, float)
     r = np.broadcast_to(np.asarray(radius_m, float), (len(pts),))
     ang = 2.0 * np.pi * np.arange(_DISC_DIRECTIONS) / _DISC_DIRECTIONS
-    ring = 1.05 * r[:, None]
-    xs = np.concatenate([pts[:, :1], pts[:, :1] + ring * np.cos(ang)], axis=1)
-    ys = np.concatenate([pts[:, 1:2], pts[:, 1:2] + ring * np.sin(ang)], axis=1)
-    h = np.asarray(terrain.height_sharp(xs, ys), dtype=float).reshape(xs.shape).max(axis=1)
+    h = np.empty(len(pts))
+    for radius in np.unique(r):  # the disc's offsets, one set per radius
+        at = r == radius
+        ox = np.concatenate([[0.0], 1.05 * radius * np.cos(ang)])
+        oy = np.concatenate([[0.0], 1.05 * radius * np.sin(ang)])
+        h[at] = terrain.height_sharp_offsets(pts[at, 0], pts[at, 1], ox, oy).max(axis=1)
     return pts[:, 2] - r - h
 
 
@@ -407,7 +409,7 @@ def _nearest_on_terrain(terrain, a: _Array, b: _Array, reach_m: float) -> Witnes
     xs = np.arange(lo[0], hi[0] + g, g)
     ys = np.arange(lo[1], hi[1] + g, g)
     X, Y = np.meshgrid(xs, ys)  # [iy, ix]
-    H = np.asarray(terrain.height_sharp(X.ravel(), Y.ravel()), float).reshape(X.shape)
+    H = terrain.height_sharp_offsets(xs, np.full(len(xs), ys[0]), 0.0, ys - ys[0]).T
     clouds = [np.stack([X, Y, H], axis=-1).reshape(-1, 3)]
     for axis in (0, 1):  # faces between neighbours along x, then y
         h0 = H[:, :-1] if axis == 1 else H[:-1, :]

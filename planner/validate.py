@@ -309,7 +309,7 @@ def sharp_surface_distance(
         n = len(pc)
         hx = pc[:, 0, None, None] + ux[None]
         hy = pc[:, 1, None, None] + uy[None]
-        h = np.asarray(terrain.height_sharp(hx, hy), dtype=float).reshape(n, m, m)
+        h = terrain.height_sharp_offsets(pc[:, 0], pc[:, 1], ux, uy).reshape(n, m, m)
         d_graph = np.sqrt(r2[None] + (pc[:, 2, None, None] - h) ** 2)
         d = d_graph.reshape(n, -1).min(axis=1)
         for axis in (2, 1):  # faces between x-neighbours, then y-neighbours

@@ -643,3 +643,38 @@ def test_ipopt_projects_points_onto_the_surface(name):
         # the offset from p0 is along the surface normal (KKT)
         d = np.asarray(q) - x
         assert np.linalg.norm(np.cross(d, t.normal(x))) < 1e-6 * max(1.0, np.linalg.norm(d))
+
+
+@pytest.mark.parametrize(("name", "t"), ALL, ids=IDS)
+def test_heights_at_offsets_are_the_heights_of_the_moved_points(name, t):
+    """height_sharp_offsets (a relief's matrix product) against height_sharp point by point."""
+    p = _random_points(t, 30, seed=3)
+    rng = np.random.default_rng(4)
+    dx, dy = rng.uniform(-0.05, 0.05, 17), rng.uniform(-0.05, 0.05, 17)
+    got = t.height_sharp_offsets(p[:, 0], p[:, 1], dx, dy)
+    want = t.height_sharp(p[:, 0, None] + dx[None, :], p[:, 1, None] + dy[None, :])
+    np.testing.assert_allclose(got, want, atol=1e-14, rtol=0)
+
+
+def test_the_relief_gradient_is_casadi_s_exact_one():
+    """The relief's analytic numpy gradient against CasADi's algorithmic derivative."""
+    t = Terrain.from_spec(
+        {
+            "name": "r",
+            "x_min": -0.5,
+            "length": 3.0,
+            "kind": "rough",
+            "amplitude": 0.03,
+            "wavelength": 0.1,
+            "x_start": 0.0,
+            "x_end": 2.0,
+            "seed": 7,
+        }  # fmt: skip
+    )
+    p = _random_points(t, 50, seed=5)
+    p[:5, 0] = [0.0, 0.05, 1.95, 2.0, -0.1]  # in the tapers too
+    P = ca.SX.sym("p", 3)
+    jac = ca.Function("j", [P], [ca.jacobian(t.f_T_ca(P), P)])
+    g = t.gradient(p)
+    for i in range(len(p)):
+        np.testing.assert_allclose(np.array(jac(p[i])).ravel(), g[i], atol=1e-12, rtol=1e-10)
