@@ -4,11 +4,12 @@
 ``stratawalk plan`` would (soft persuasion, 8.2, the default settings), and reports the
 median wall time of planning (the local planner: Theta solves, IK, statics, terrain
 queries) and of everything ``stratawalk plan`` does (planning, assembly of the samples
-and ``check``), with the walk's time and speed from the plan. One more run under
-:mod:`cProfile` splits that time by where it is spent: each function's *own* time goes to
-the group of its module (:data:`GROUPS`); a function outside the package (numpy, CasADi,
-Pinocchio, builtins) counts for the group of its heaviest caller, so the parts add up to
-the profiled total. Flat walks of 1, 2, 4 and 8 m (``FLAT_LENGTHS_M``) show how the cost
+and ``check``), with the walk's time and speed from the plan; the first plan of each
+course is executed in MuJoCo at its own timing, open loop and with feedback (8.3). One
+more run under :mod:`cProfile` splits that time by where it is spent: each function's
+*own* time goes to the group of its module (:data:`GROUPS`); a function outside the
+package (numpy, CasADi, Pinocchio, builtins) counts for the group of its heaviest caller,
+so the parts add up to the profiled total. Flat walks of 1, 2, 4 and 8 m (``FLAT_LENGTHS_M``) show how the cost
 grows with the length of the walk. Writes ``speed.json`` and ``speed.md``. Timings are
 measurements of this machine, never asserted in tests.
 """
@@ -106,8 +107,14 @@ def _flat(length_m: float):
     return Terrain.from_spec(spec, source="bench speed")
 
 
-def _plan_once(terrain_name: str, length_m: float | None, goal_x: float, profile: bool):
-    """One plan in this process: its figures, wall time and (``profile``) time per group."""
+def _plan_once(
+    terrain_name: str, length_m: float | None, goal_x: float, profile: bool, sim: bool = False
+):
+    """One plan in this process: its figures, wall time and (``profile``) time per group.
+
+    ``sim``: the plan is then executed in MuJoCo at time scale 1, open loop and with
+    feedback (8.3), each summarised by :func:`_sim_summary`.
+    """
     from planner.terrain import load_terrain
     from planner.walk import plan_walk
 
@@ -121,7 +128,9 @@ def _plan_once(terrain_name: str, length_m: float | None, goal_x: float, profile
         prof.disable()
     wall = time.perf_counter() - t0
     s = plan.samples
+    mujoco = _simulate(plan) if sim and plan.outcome.get("reached_goal") and report.ok else None
     return {
+        "mujoco": mujoco,
         "reached": bool(plan.outcome.get("reached_goal")),
         "check_ok": bool(report.ok),
         "steps": int(plan.stats.get("steps", 0)),
@@ -129,6 +138,28 @@ def _plan_once(terrain_name: str, length_m: float | None, goal_x: float, profile
         "wall_s": wall,
         "walk_s": float(s.time[-1] - s.time[0]) if len(s) else 0.0,
         "groups": profile_groups(pstats.Stats(prof)) if prof is not None else None,
+    }
+
+
+def _simulate(plan) -> dict[str, dict]:
+    """The plan in MuJoCo at its own timing: open loop and feedback (8.3)."""
+    from planner.execution import run_feedback
+    from planner.simulate import SimSettings, run_open_loop
+
+    settings = SimSettings(time_scale=1.0)
+    return {
+        "open": _sim_summary(run_open_loop(plan, settings).metrics),
+        "feedback": _sim_summary(run_feedback(plan, settings).metrics),
+    }
+
+
+def _sim_summary(m) -> dict:
+    """reached, fell, the final error and the COM's distance to the goal [cm] of a run."""
+    return {
+        "reached": bool(m.reached),
+        "fell": bool(m.fell),
+        "final_error_cm": 100.0 * float(m.final_error_m),
+        "com_to_goal_cm": 100.0 * float(m.com_to_goal_m),
     }
 
 
@@ -146,7 +177,7 @@ def _fresh(*args):
 
 
 def _measure(name: str, length_m: float | None, goal_x: float, repeats: int, profile: bool):
-    runs = [_fresh(name, length_m, goal_x, False) for _ in range(repeats)]
+    runs = [_fresh(name, length_m, goal_x, False, profile and i == 0) for i in range(repeats)]
     planning = [r["planning_s"] for r in runs]
     metres = goal_x - START_XY[0]
     last = runs[-1]
@@ -163,6 +194,7 @@ def _measure(name: str, length_m: float | None, goal_x: float, repeats: int, pro
         "total_median_s": statistics.median(r["wall_s"] for r in runs),
         "walk_s": last["walk_s"],
         "walk_speed_cm_s": 100.0 * metres / last["walk_s"] if last["walk_s"] > 0 else None,
+        "mujoco": runs[0]["mujoco"],
     }
     row["planning_to_walk"] = row["planning_median_s"] / last["walk_s"] if last["walk_s"] else None
     if profile:
@@ -243,6 +275,26 @@ def render_markdown(result: dict[str, Any]) -> str:
         )
     lines += [
         "",
+        "## The plans in MuJoCo",
+        "",
+        "The first plan of each course executed at its own timing (time scale 1): reached = "
+        "open loop, the final base within 5 cm of the plan's; feedback (8.3), the COM within "
+        "5 cm of the goal.",
+        "",
+        "| course | walk speed [cm/s] | open loop | final error [cm] | feedback "
+        "| COM to goal [cm] |",
+        "|---|---:|---|---:|---|---:|",
+    ]
+    for r in result["courses"]:
+        mj = r.get("mujoco") or {}
+        op, fb = mj.get("open"), mj.get("feedback")
+        lines.append(
+            f"| {r['course']} | {_f(r['walk_speed_cm_s'], '.2f')} | {_verdict(op)} "
+            f"| {_f(op and op['final_error_cm'], '.1f')} | {_verdict(fb)} "
+            f"| {_f(fb and fb['com_to_goal_cm'], '.1f')} |"
+        )
+    lines += [
+        "",
         "## Flat walks by length",
         "",
         "| walk [m] | reached, check | steps | planning [s] | per m [s] | total [s] "
@@ -260,6 +312,14 @@ def render_markdown(result: dict[str, Any]) -> str:
             f"| {f['total_median_s']:.2f} | {_f(ratio, '.2f')} |"
         )
     return "\n".join(lines) + "\n"
+
+
+def _verdict(run: dict | None) -> str:
+    if run is None:
+        return "-"
+    if run["fell"]:
+        return "fell"
+    return "reached" if run["reached"] else "not reached"
 
 
 def add_speed_parser(subparsers) -> Any:

@@ -37,7 +37,8 @@ def test_profile_groups_give_library_time_to_the_heaviest_caller():
 
 
 def test_a_tiny_speed_bench_writes_its_tables(tmp_path, capsys):
-    """One course and one flat length, once each in a new process, plus the profiled run."""
+    """One course and one flat length, once each in a new process (the course's plan also in
+    MuJoCo), plus the profiled run."""
     res = run_speed_bench(("flat",), 0.45, (0.25,), 1, tmp_path)
     (row,), (flat,) = res["courses"], res["flat"]
     assert row["reached"] and row["check_ok"] and row["steps"] >= 4
@@ -49,5 +50,10 @@ def test_a_tiny_speed_bench_writes_its_tables(tmp_path, capsys):
     assert json.loads((tmp_path / "speed.json").read_text())["format"] == "stratawalk.bench.speed/1"
     md = (tmp_path / "speed.md").read_text()
     assert "| flat | yes, ok |" in md and "## Flat walks by length" in md
+    # the first plan, executed in MuJoCo at its own timing: it holds up
+    for mode in ("open", "feedback"):
+        run = row["mujoco"][mode]
+        assert run["reached"] and not run["fell"], (mode, run)
+    assert "## The plans in MuJoCo" in md and "| reached |" in md
     assert main(["bench", "speed", "--repeats", "0", "--out", str(tmp_path)]) == 2
     assert "--repeats: must be >= 1" in capsys.readouterr().err
