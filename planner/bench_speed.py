@@ -9,9 +9,10 @@ course is executed in MuJoCo at its own timing, open loop and with feedback (8.3
 more run under :mod:`cProfile` splits that time by where it is spent: each function's
 *own* time goes to the group of its module (:data:`GROUPS`); a function outside the
 package (numpy, CasADi, Pinocchio, builtins) counts for the group of its heaviest caller,
-so the parts add up to the profiled total. Flat walks of 1, 2, 4 and 8 m (``FLAT_LENGTHS_M``) show how the cost
-grows with the length of the walk. Writes ``speed.json`` and ``speed.md``. Timings are
-measurements of this machine, never asserted in tests.
+so the parts add up to the profiled total. Flat walks of 1, 2, 4 and 8 m
+(``FLAT_LENGTHS_M``) show how the cost grows with the length of the walk. Writes
+``speed.json`` and ``speed.md``. Timings are measurements of this machine, never asserted
+in tests.
 """
 
 from __future__ import annotations
