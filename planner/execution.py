@@ -282,7 +282,7 @@ def run_feedback(
     ``no_progress_cycles`` cycles, or on a fall.
     """
     from planner.local.gait_queue import GaitQueue
-    from planner.local.soft import LocalSettings, SoftPlanner
+    from planner.local.soft import SoftPlanner
     from planner.trajectory import Trajectory
 
     wall0 = _time.perf_counter()
@@ -290,7 +290,7 @@ def run_feedback(
     t0 = sim.time
     src = _source(sim, source, **noise)
     robot, terrain = plan.load_robot(), plan.load_terrain()
-    st = local_settings or LocalSettings()
+    st = local_settings or _planned_settings(plan)
     local = SoftPlanner(robot, terrain, mu=plan.friction, settings=st)
     tau = Trajectory.straight(plan.start[:2], plan.goal[:2], terrain, local.com_height_m())
     goal = plan.goal[:2]
@@ -422,6 +422,24 @@ def run_feedback(
         }
     }
     return finish_run(plan, ex, wall0, t0, extra)
+
+
+def _planned_settings(plan):
+    """The local planner's settings the plan was made with (``stats.settings``), else defaults.
+
+    Feedback re-plans with them: a plan made with ``--body-accel 0.2`` is walked so.
+    """
+    from planner.local.base import LocalSettings
+    from planner.settings import SETTINGS, resolve
+
+    known = {s.name for s in SETTINGS}
+    recorded = {k: v for k, v in (plan.stats.get("settings") or {}).items() if k in known}
+    recorded.pop("mu", None)  # the plan's friction is passed on its own
+    recorded.pop("time_budget_s", None)  # a budget for planning a whole walk, not a step
+    try:
+        return resolve(options=recorded).local
+    except InputError:
+        return LocalSettings()
 
 
 def _execute(ex, robot, sim, path: list, times: _Array) -> bool:

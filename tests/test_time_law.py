@@ -214,3 +214,17 @@ def test_a_body_move_on_a_slope_accelerates_only_as_its_feet_can_carry(littledog
     # the check binds: without it (every interval at the cap) the move is quicker
     monkeypatch.setattr("planner.time_law.carried_accel_m_s2", lambda margin, cap, need: cap)
     assert planner.body_offsets_s(path)[-1] < t[-1] - 1e-3
+
+
+def test_feedback_replans_with_the_settings_the_plan_was_made_with():
+    """A plan made with a gentler time law and another gait is walked with them (8.3)."""
+    from planner.execution import _planned_settings
+    from planner.local.base import LocalSettings
+    from planner.walk import plan_walk
+
+    settings = LocalSettings(body_accel_m_s2=0.2, swing_time_s=0.7, gait=(0, 3, 1, 2))
+    plan, report = plan_walk("littledog", "flat", (0.3, 0.0), (0.2, 0.0), settings=settings)
+    assert report.ok
+    st = _planned_settings(plan)
+    assert (st.body_accel_m_s2, st.swing_time_s, tuple(st.gait)) == (0.2, 0.7, (0, 3, 1, 2))
+    assert st.step_m == pytest.approx(plan.stats["settings"]["step_m"])
