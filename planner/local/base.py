@@ -837,6 +837,7 @@ class LocalPlanner:
                 normals,
                 with_com_margin=False,
             )
+            s.info["margin_N"] = float(res.margin_N)  # the time law's floor (body_offsets_s)
             if not res.margin_N >= need:  # nan (solver failure) fails too
                 return (
                     f"balance lost at sample {k} of the path (friction-cone margin "
@@ -1250,8 +1251,10 @@ class LocalPlanner:
         def margin(k: int, a: float) -> float:
             out = np.inf
             for j in (k, k + 1):
-                if j not in floors:
-                    floors[j] = max(need, CARRIED_SHARE * raw(j, g_W))
+                if j not in floors:  # the static margin: path_problem's, if it solved it
+                    still = path[j].info.get("margin_N")
+                    still = raw(j, g_W) if still is None else still
+                    floors[j] = max(need, CARRIED_SHARE * still)
                 out = min(out, raw(j, g_W - a * u[k]) - floors[j])
             return out
 
