@@ -399,9 +399,7 @@ def run_feedback(
                 local._log_failure(cycles, leg, step.phase, where, step.diagnosis)
             if step.moved is None:
                 continue  # the body move failed: nothing to execute
-            swing = step.swing_path if step.ok else []
-            path = list(step.body_path) + list(swing[1:])
-            times = local.step_times_s(step)  # the planner's own time law
+            path, times = local.step_samples(step)  # the planner's own time law
             if not _execute(ex, robot, sim, path, times):
                 message = f"fell at {m.fall_time_s:.1f} s ({m.fall_reason})"
                 break

@@ -137,8 +137,12 @@ def test_the_executor_times_a_step_as_the_planner_does(littledog):
     assert step.ok, step.diagnosis
     walk = Walk(planner, state)
     walk.add(step)
-    np.testing.assert_allclose(walk.times, planner.step_times_s(step))
-    assert len(walk.samples) == len(step.body_path) + len(step.swing_path) - 1
+    states, times = planner.step_samples(step)
+    np.testing.assert_allclose(walk.times, times)
+    assert len(walk.samples) == len(states)
+    for a, b in zip(walk.samples[1:], states[1:], strict=True):
+        np.testing.assert_array_equal(a.joints_rad, b.joints_rad)
+    assert len(states) == len(step.body_path) + len(step.swing_path) - 1
 
 
 def test_the_carried_acceleration_is_the_largest_that_keeps_the_margin():

@@ -203,12 +203,13 @@ class Walk:
         p = self.planner
         if step.moved is None:
             return
-        t = self.times[-1] + p.step_times_s(step)
+        states, t = p.step_samples(step)
+        t = self.times[-1] + t
         n_body = max(len(step.body_path) - 1, 0)
-        p._append(self.samples, self.times, step.body_path, t[1 : 1 + n_body])
+        p._append(self.samples, self.times, states[: 1 + n_body], t[1 : 1 + n_body])
         self.keyframes.append(step.moved)
         if step.ok:
-            p._append(self.samples, self.times, step.swing_path, t[1 + n_body :])
+            p._append(self.samples, self.times, states[n_body:], t[1 + n_body :])
             self.keyframes += [p._swing_keyframe(step.swing_path, step.leg, p.check), step.end]
             self.steps += 1
 
@@ -1292,15 +1293,18 @@ class LocalPlanner:
         )
         return np.cumsum(dt)
 
-    def step_times_s(self, step: Step) -> NDArray[np.float64]:
-        """Times [s] of a step's body-path samples then its swing's (their shared sample once).
+    def step_samples(self, step: Step) -> tuple[list[State], NDArray[np.float64]]:
+        """A step's samples and their times [s] from 0 at its start (the executor's too, 8.3).
 
-        From 0 at the step's start; the executor (8.3) follows a step at these times too.
+        The body path, then (a placement) the swing; their shared sample appears once.
         """
-        body = self.body_offsets_s(step.body_path) if step.moved is not None else np.zeros(0)
-        swing = self.swing_offsets_s(step.swing_path, step.leg) if step.ok else np.zeros(0)
-        end = body[-1] if len(body) else 0.0
-        return np.concatenate([[0.0], body, end + swing])
+        states = list(step.body_path)
+        times = [0.0] + list(self.body_offsets_s(states))
+        if step.ok:
+            swing = self.swing_offsets_s(step.swing_path, step.leg)
+            states += list(step.swing_path[1:])
+            times += list(times[-1] + swing)
+        return states, np.array(times[: len(states)])
 
     def _joint_speed_limits(self) -> NDArray[np.float64] | None:
         """The URDF's velocity limits of the 12 leg joints [rad/s] (None where none is set)."""
