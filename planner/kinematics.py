@@ -265,13 +265,15 @@ class LegKinematics:
         reference_rad=None,
         knee: int | None = None,
         tol_m: float = 1e-9,
+        closest: bool = True,
     ) -> IKResult:
         """Joint angles putting leg ``leg``'s foot centre at ``target_B`` (section 5.1.2).
 
         ``knee`` (+1 forward, -1 rearward) defaults to the leg's knee configuration;
         among the in-limit solutions of that branch the one nearest ``reference_rad``
         (default theta_nor) is returned. If only the other branch reaches, it is returned
-        with ``knee_flipped=True``; if none does, ``reachable=False``.
+        with ``knee_flipped=True``; if none does, ``reachable=False`` with the closest
+        in-limit angles (a numeric search), or with ``reference_rad`` when not ``closest``.
         """
         lg = self.legs[leg]
         target = np.asarray(target_B, dtype=float)
@@ -284,6 +286,14 @@ class LegKinematics:
             return self._ik_numeric(leg, target, ref, want, tol_m)
         groups = self._ik_paden_kahan(leg, target, centre, tol_m)
         sols = [s for g in groups for s in g]
+        if not sols and not closest:
+            return IKResult(
+                joints_rad=ref.copy(),
+                reachable=False,
+                error_m=math.nan,
+                method="paden-kahan",
+                reason="no exact in-limit solution",
+            )
         if not sols:
             # no exact solution: only the closest in-limit angles are wanted (few starts)
             res = self._ik_numeric(leg, target, ref, want, tol_m, n_starts=4)

@@ -285,7 +285,7 @@ class Theta2(ThetaProblem):
         centre_B = start.base_rotation_W.T @ (
             p[self._p_slices["swing_target_W"]] - start.base_position_W
         )
-        ik = self.kin.ik_leg(leg, centre_B, reference_rad=start.joints_rad[leg])
+        ik = self.kin.ik_leg(leg, centre_B, reference_rad=start.joints_rad[leg], closest=False)
         return ik.joints_rad if ik.reachable else self.robot.theta_nor[leg].copy()
 
     def _link_state(self, name: str, state: State, x: np.ndarray) -> State:
