@@ -30,10 +30,9 @@ from typing import TYPE_CHECKING
 import clarabel
 import numpy as np
 import pinocchio as pin
-import scipy.sparse as sp
 from numpy.typing import NDArray
 
-from planner.statics import _tangent_bases
+from planner.statics import _csc, _tangent_bases
 
 if TYPE_CHECKING:
     from planner.robot import Robot
@@ -159,12 +158,12 @@ class TorqueCheck:
         b.append(np.zeros(3 * k))
         cones += [clarabel.SecondOrderConeT(3) for _ in range(k)]
         cost = np.zeros(nv)
-        hess = sp.csc_matrix((nv, nv))
+        hess = _csc(np.zeros((nv, nv)))
         if least_squares:  # |W (g_a - A f)|^2 = f'A'W'W A f - 2 g_a'W'W A f + const
             a = self.weights[:, None] * jt[self.v_idx]
             h = np.zeros((nv, nv))
             h[: 3 * k, : 3 * k] = 2.0 * a.T @ a
-            hess = sp.triu(sp.csc_matrix(h), format="csc")
+            hess = _csc(np.triu(h))
             cost[: 3 * k] = -2.0 * a.T @ (self.weights * g[self.v_idx])
             cost[-1] = 1e-6
         else:
@@ -172,7 +171,7 @@ class TorqueCheck:
         settings = clarabel.DefaultSettings()
         settings.verbose = False
         solver = clarabel.DefaultSolver(
-            hess, cost, sp.csc_matrix(np.vstack(rows)), np.concatenate(b), cones, settings
+            hess, cost, _csc(np.vstack(rows)), np.concatenate(b), cones, settings
         )
         res = solver.solve()
         status = str(res.status)
