@@ -49,6 +49,7 @@ __all__ = [
     "smootherstep",
     "interpolate_leaf",
     "interpolate_swing",
+    "between_q",
 ]
 
 _Array = NDArray[np.float64]
@@ -57,6 +58,8 @@ CLEARANCE_FRACTION_OF_REACH = 0.167  # default clearance = 0.167 * leg reach (0.
 ON_TERRAIN_TOL_M = 1e-6  # a foot point within this of height(x, y) is on the terrain
 STANCE_TOL_M = 1e-9  # stance feet of the two ends of a leaf must agree to this
 PHASES = ("liftoff", "rise", "travel", "descend", "touchdown")
+BETWEEN_SAMPLES_RAD = 0.2  # a joint moving more in one sample interval has its leg links
+BETWEEN_STEP_RAD = 0.05  # checked this often between the samples (planner and check)
 
 
 class _Terrain(Protocol):
@@ -65,6 +68,16 @@ class _Terrain(Protocol):
     def height_sharp(self, x: ArrayLike, y: ArrayLike) -> _Array: ...
 
     def normal(self, p_W: ArrayLike) -> _Array: ...
+
+
+def between_q(q_a: NDArray[np.float64], q_b: NDArray[np.float64], u: float) -> NDArray:
+    """Pinocchio q a share ``u`` from ``q_a`` to ``q_b``: linear, the quaternion normalised.
+
+    What the executor commands between two samples (the base moves little in one).
+    """
+    q = (1.0 - u) * np.asarray(q_a, float) + u * np.asarray(q_b, float)
+    q[3:7] /= np.linalg.norm(q[3:7])
+    return q
 
 
 def default_clearance_m(robot: Robot) -> float:

@@ -91,6 +91,7 @@ from planner.contact import (
     unique_contact_points,
 )
 from planner.errors import PlannerError
+from planner.interpolate import BETWEEN_SAMPLES_RAD, BETWEEN_STEP_RAD, between_q
 from planner.links import LegLinks
 from planner.plan import Plan
 from planner.robot import LEG_NAMES
@@ -739,15 +740,52 @@ class _Checker:
             )
 
     def leg_clearance(self, report: CheckReport) -> None:
-        """Thigh and shank capsules vs the sharp terrain (``leg_clearance``)."""
-        from scipy.ndimage import maximum_filter
+        """Thigh and shank capsules vs the sharp terrain (``leg_clearance``).
 
+        At every sample, and between two samples where a joint moves more than
+        ``BETWEEN_SAMPLES_RAD`` (the executor interpolates the joints linearly: a knee
+        flipping between two clear samples can sweep its shank through the terrain), at
+        configurations ``BETWEEN_STEP_RAD`` apart.
+        """
         sm, tol = self.plan.samples, self.tol
         links = LegLinks(self.robot)
-        n, P = len(sm), len(links.owner)
+        per = self._link_clearances(links, sm.q)
+        report.min_leg_clearance_m = float(per.min()) if per.size else math.nan
+        for k, c in zip(*np.nonzero(per < tol.leg_clearance_m), strict=True):
+            self._leg_violation(links, f"sample {k}", c, per[k, c])
+        for k in range(len(sm) - 1):
+            jump = float(np.max(np.abs(sm.q[k + 1, 7:] - sm.q[k, 7:])))
+            if jump <= BETWEEN_SAMPLES_RAD:
+                continue
+            m = int(math.ceil(jump / BETWEEN_STEP_RAD))
+            qs = np.array([between_q(sm.q[k], sm.q[k + 1], u) for u in np.arange(1, m) / m])
+            mid = self._link_clearances(links, qs).min(axis=0)
+            report.min_leg_clearance_m = min(report.min_leg_clearance_m, float(mid.min()))
+            for c in np.flatnonzero(mid < tol.leg_clearance_m):
+                self._leg_violation(links, f"sample {k}", c, mid[c], f" between it and {k + 1}")
+
+    def _leg_violation(self, links: LegLinks, where: str, c: int, value: float, extra="") -> None:
+        cap = links.capsules[c]
+        tol = self.tol.leg_clearance_m
+        self.add(
+            "leg_clearance",
+            where,
+            cap.leg,
+            value,
+            tol,
+            f"{_leg(cap.leg)} {cap.link} ({cap.urdf_link}) reaches {_mm(-value)} into "
+            f"the sharp terrain{extra} (least clearance {_mm(tol)})",
+        )
+
+    def _link_clearances(self, links: LegLinks, q_all: _Array) -> _Array:
+        """(N, capsules) clearances [m] of the leg links at configurations ``q_all``."""
+        from scipy.ndimage import maximum_filter
+
+        tol = self.tol
+        n, P = len(q_all), len(links.owner)
         pts = np.empty((n, P, 3))
         for k in range(n):
-            pts[k] = links.axis_points_W(sm.q[k])
+            pts[k] = links.axis_points_W(q_all[k])
         flat = pts.reshape(-1, 3)
         rad = np.tile(links.radius, n)
         # bound: highest terrain node within (radius + node) of a point, on a 5 mm raster
@@ -774,19 +812,8 @@ class _Checker:
         np.minimum.at(per, (sample, owner), clear)
         # refine along the axis around the closest point of the capsules near the limit
         for k, c in zip(*np.nonzero(per < tol.leg_clearance_m + 1e-3), strict=True):
-            per[k, c] = min(per[k, c], self._capsule_clearance(links, sm.q[k], c))
-        report.min_leg_clearance_m = float(per.min()) if per.size else math.nan
-        for k, c in zip(*np.nonzero(per < tol.leg_clearance_m), strict=True):
-            cap = links.capsules[c]
-            self.add(
-                "leg_clearance",
-                f"sample {k}",
-                cap.leg,
-                per[k, c],
-                tol.leg_clearance_m,
-                f"{_leg(cap.leg)} {cap.link} ({cap.urdf_link}) reaches {_mm(-per[k, c])} into "
-                f"the sharp terrain (least clearance {_mm(tol.leg_clearance_m)})",
-            )
+            per[k, c] = min(per[k, c], self._capsule_clearance(links, q_all[k], c))
+        return per
 
     def _capsule_clearance(self, links: LegLinks, q: _Array, c: int) -> float:
         """Clearance of capsule c at q from points 0.2 mm apart along its whole axis."""
