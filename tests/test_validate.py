@@ -68,6 +68,19 @@ def kinds_at(report, kind):
     return {v.where for v in report.violations if v.kind == kind}
 
 
+def wall_into(terrain: dict, low, radius_m: float, thickness_m: float) -> dict:
+    """A plan's terrain spec made a wall centred below ``low`` (a link axis point of radius
+    ``radius_m``), its top 3 mm into the link, only on the left (y > low_y - 3 cm)."""
+    return {
+        **terrain,
+        "kind": "barrier",
+        "x": float(low[0]) - 0.5 * thickness_m,
+        "thickness": thickness_m,
+        "height": float(low[2]) - radius_m + 0.003,
+        "opening": [-1.0, float(low[1]) - 0.03],
+    }
+
+
 SWING = range(N, 2 * N - 2)  # samples with leg 1 in the air
 MID_SWING = N + N // 2
 
@@ -169,14 +182,7 @@ def test_shank_in_a_step_edge_fails(flat_plan, littledog):
     a, b = (s[c] for s in links.segments_W(plan.samples.q[k]))
     low = a if a[2] < b[2] else b  # the capsule's lowest point is below this axis end
     r = links.capsules[c].radius_m
-    plan.terrain = {
-        **plan.terrain,
-        "kind": "barrier",
-        "x": float(low[0]) - 0.003,
-        "thickness": 0.006,
-        "height": float(low[2]) - r + 0.003,
-        "opening": [-1.0, float(low[1]) - 0.03],  # the wall only on the left
-    }
+    plan.terrain = wall_into(plan.terrain, low, r, 0.006)
     report = check_plan(plan)
     legs = [v for v in report.violations if v.kind == "leg_clearance"]
     at_k = [v for v in legs if v.where == f"sample {k}" and v.leg == 1]
@@ -286,14 +292,7 @@ def test_a_knee_flipping_between_two_clear_samples_through_a_wall_fails(flat_pla
     mid = links.axis_points_W(between_q(q, plan.samples.q[k + 1], 0.5))[fl]
     low = mid[np.argmin(mid[:, 2])]
     r = max(cap.radius_m for cap in links.capsules if cap.leg == 0)
-    plan.terrain = {
-        **plan.terrain,
-        "kind": "barrier",
-        "x": float(low[0]) - 0.01,
-        "thickness": 0.02,
-        "height": float(low[2]) - r + 0.003,
-        "opening": [-1.0, float(low[1]) - 0.03],  # the wall only on the left
-    }
+    plan.terrain = wall_into(plan.terrain, low, r, 0.02)
     report = check_plan(plan)
     between = [v for v in report.violations if "between it and" in v.message]
     assert between and between[0].where == f"sample {k}" and between[0].leg == 1, report
