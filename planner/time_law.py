@@ -34,7 +34,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 __all__ = [
-    "body_durations_s",
     "body_profile",
     "swing_durations_s",
     "rest_to_rest_durations_s",
@@ -145,11 +144,6 @@ def _joint_caps(
     worst = need.max(axis=1)
     with np.errstate(divide="ignore"):
         return np.where(worst > 0.0, lengths / np.maximum(worst, 1e-300), np.inf)
-
-
-def body_durations_s(*args, **kwargs) -> _Array:
-    """Durations [s] of a body move's intervals: :func:`body_profile`'s."""
-    return body_profile(*args, **kwargs)[0]
 
 
 def body_profile(

@@ -9,7 +9,7 @@ import pytest
 from planner.time_law import (
     JOINT_SPEED_FRACTION,
     LANDING_FRACTION,
-    body_durations_s,
+    body_profile,
     rest_to_rest_durations_s,
     swing_durations_s,
 )
@@ -78,11 +78,11 @@ def test_body_move_respects_the_joint_limits_and_counts_a_turn():
         R.append(np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]))
     p = np.zeros((5, 3))
     th = np.zeros((5, 12))
-    dt = body_durations_s(p, R, th, speed_m_s=0.1, accel_m_s2=1.0, arm_m=0.1, vmax_rad_s=None)
+    dt, _ = body_profile(p, R, th, speed_m_s=0.1, accel_m_s2=1.0, arm_m=0.1, vmax_rad_s=None)
     assert dt.sum() > 0.1 * 0.2 / 0.1  # at least the hips' travel at the peak speed
     th[:, 0] = np.linspace(0.0, 1.0, 5)  # 0.25 rad per interval
     vmax = np.full(12, 7.0)
-    dt = body_durations_s(p, R, th, speed_m_s=0.1, accel_m_s2=1.0, arm_m=0.1, vmax_rad_s=vmax)
+    dt, _ = body_profile(p, R, th, speed_m_s=0.1, accel_m_s2=1.0, arm_m=0.1, vmax_rad_s=vmax)
     assert np.all(0.25 / dt <= JOINT_SPEED_FRACTION * 7.0 * (1 + 1e-9))
 
 
