@@ -90,7 +90,9 @@ class ProblemCache:
             if theta == "Theta1":
                 prob = Theta1(robot, terrain, support=key, options=o, mu=mu)
             elif theta == "Theta2":
-                prob = Theta2(robot, terrain, support=key, options=o, mu=mu)
+                # the NLP with every row its check applies (the planner adds the torque rows
+                # to a three-leg Theta2 only when a solve without them overloads a joint)
+                prob = Theta2(robot, terrain, support=key, options=o, mu=mu, torque_rows=True)
             elif theta == "Theta3":
                 prob = Theta3(robot, terrain, leg=key, options=o, mu=mu)
             elif theta == "Theta4":

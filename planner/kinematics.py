@@ -227,6 +227,42 @@ class LegKinematics:
         ]
         return ca.horzcat(*cols)
 
+    def contact_jacobian_W_ca(self, leg: int, base_rotation_W, theta, offset_W):
+        """Symbolic (3, 3) world-frame Jacobian of a foot's contact point w.r.t. its leg's joints.
+
+        The point is the shank's point at ``offset_W`` from the foot centre (the contact
+        point: offset -rho n). Column j is R (d centre_B / d theta_j) + omega_j x offset_W,
+        with omega_j the joint's axis in world frame: the point moves with the shank, as in
+        Pinocchio's frame Jacobian moved from the sphere centre to the contact point
+        (:mod:`planner.torques`).
+        """
+        lg = self.legs[leg]
+        centre_B = twist_apply_ca(lg, theta, lg.foot_B0)
+        jac = ca.mtimes(base_rotation_W, ca.jacobian(centre_B, theta))
+        cols = []
+        for j in range(3):
+            r = ca.DM(lg.points_B[j])
+            axis_B = twist_apply_ca(lg, theta, r + ca.DM(lg.axes_B[j]), upto=j) - (
+                twist_apply_ca(lg, theta, r, upto=j)
+            )
+            cols.append(jac[:, j] + ca.cross(ca.mtimes(base_rotation_W, axis_B), offset_W))
+        return ca.horzcat(*cols)
+
+    def gravity_torque_ca(self, leg: int, base_rotation_W, theta, g_m_s2: float = 9.81):
+        """Symbolic (3,) generalized gravity of a leg's joints [N m]: d V / d theta.
+
+        V = g sum_l m_l z_l over the leg's links (their world heights, base fixed): the leg's
+        rows of Pinocchio's ``computeGeneralizedGravity`` (the joint torque that holds the
+        leg's own weight is this minus J^T f).
+        """
+        lg = self.legs[leg]
+        height = 0
+        for j, mass, com0 in self._link_mass[leg]:
+            height = height + mass * ca.mtimes(
+                base_rotation_W[2, :], twist_apply_ca(lg, theta, com0, upto=j + 1)
+            )
+        return ca.gradient(g_m_s2 * height, theta) if self._link_mass[leg] else ca.DM.zeros(3)
+
     # ---- centre of mass -----------------------------------------------------------------
     def com_B(self, joints_rad, whole_body: bool = True) -> np.ndarray:
         """Centre of mass in body frame: whole-body (default) or body link only (paper)."""

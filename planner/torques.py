@@ -27,6 +27,7 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+import casadi as ca
 import clarabel
 import numpy as np
 import pinocchio as pin
@@ -38,10 +39,22 @@ if TYPE_CHECKING:
     from planner.robot import Robot
     from planner.terrain import Terrain
 
-__all__ = ["TorqueCheck", "TorqueFeasibility", "holding_load", "joint_efforts_nm"]
+__all__ = [
+    "COMMANDED_TORQUE_FRACTION",
+    "TorqueCheck",
+    "TorqueFeasibility",
+    "holding_load",
+    "joint_efforts_nm",
+    "least_squares_ratios_ca",
+]
 
 _Array = NDArray[np.float64]
 _SOLVED = ("Solved", "AlmostSolved")
+# joint torque / URDF effort the servos may need to hold a planned stance, in the force
+# distribution the feed-forward commands (least sum of (torque / effort)^2): the least
+# achievable ratio relies on internal foot forces no servo produces (barrier75mm: 49 %
+# achievable, 102 % commanded, and the HL knee saturated and the body yawed 6 degrees)
+COMMANDED_TORQUE_FRACTION = 0.8
 _E_Z = np.array([0.0, 0.0, 1.0])
 
 
@@ -217,3 +230,46 @@ def holding_load(
                 last_f, last_tau = res.forces_W, res.torques_nm
         forces[k], torques[k] = last_f, last_tau
     return forces, torques
+
+
+def least_squares_ratios_ca(
+    kin, base_rotation_W, joints12, support, contacts_W, normals_W, com_W, effort_nm, mass_kg
+):
+    """Symbolic tau_j / effort_j of the support joints in the commanded force distribution.
+
+    The distribution is the effort-weighted least squares the feed-forward commands
+    (:meth:`TorqueCheck.solve` with ``least_squares``), here without the friction cones.
+
+    ``contacts_W``, ``normals_W``: lists of 4 CasADi 3-vectors (contact points, unit
+    normals); ``com_W`` the whole-body COM; ``effort_nm`` (12,) finite URDF efforts. With
+    tau_i = g_i - J_i^T f_i per support leg (:meth:`LegKinematics.gravity_torque_ca`,
+    :meth:`LegKinematics.contact_jacobian_W_ca`) and the balance A f = b (forces sum to m g
+    up, moments about the COM to zero: eq. 4), the minimiser of sum_j (tau_j / e_j)^2
+    solves the KKT system [2 B^T B, A^T; A, 0] [f; l] = [2 B^T c; b], B = W J^T, c = W g,
+    W = diag(1 / e), solved by blocks (B is block diagonal). Equal to the SOCP's
+    distribution wherever that lies inside the cones (tested). Returns the (3 k,) ratios
+    and the k forces [N] (CasADi), in the order of ``support``.
+    """
+    b = ca.vertcat(0, 0, mass_kg * 9.81, 0, 0, 0)
+    legs = []  # per support leg: B_i^-1, (B_i^T B_i)^-1, A_i, c_i
+    for i in (int(i) for i in support):
+        th = joints12[3 * i : 3 * i + 3]
+        w = ca.DM(1.0 / np.asarray(effort_nm, float)[3 * i : 3 * i + 3])
+        offset = -kin.robot.foot_radius_m * normals_W[i]
+        jac = kin.contact_jacobian_W_ca(i, base_rotation_W, th, offset)
+        b_inv = ca.inv(ca.mtimes(ca.diag(w), jac.T))  # 3 x 3: the leg is not singular
+        a = ca.vertcat(ca.DM.eye(3), ca.skew(contacts_W[i] - com_W))
+        c = w * kin.gravity_torque_ca(i, base_rotation_W, th)
+        legs.append((b_inv, ca.mtimes(b_inv, b_inv.T), a, c))
+    # the KKT system, block by block: f_i = B_i^-1 c_i - (B_i^T B_i)^-1 A_i^T m with
+    # (sum_i A_i (B_i^T B_i)^-1 A_i^T) m = sum_i A_i B_i^-1 c_i - b, and the weighted
+    # torques c_i - B_i f_i = B_i^-T A_i^T m
+    schur = sum(ca.mtimes([a, bb, a.T]) for _, bb, a, _ in legs)
+    rhs = sum(ca.mtimes([a, bi, c]) for bi, _, a, c in legs) - b
+    m = ca.solve(schur, rhs)
+    ratios, forces = [], []
+    for bi, bb, a, c in legs:
+        at_m = ca.mtimes(a.T, m)
+        ratios.append(ca.mtimes(bi.T, at_m))
+        forces.append(ca.mtimes(bi, c) - ca.mtimes(bb, at_m))
+    return ca.vertcat(*ratios), forces

@@ -334,3 +334,31 @@ def test_theta2_retry_starts_turned_to_the_reference_directions(dog):
     np.testing.assert_allclose(feet, centres, atol=1e-8)
     sol = problem.solve(start, rc, u_f, u_n)
     assert sol.feasible, sol.diagnosis
+
+
+def test_theta2_keeps_the_commanded_torques_within_the_fraction(dog):
+    """On three legs straddling a step, Theta2 loads a hip pitch to 57 % of its effort; asked
+    for at most 40 %, it finds a pose that the independent check (Clarabel) confirms."""
+    from dataclasses import replace
+
+    from planner.torques import TorqueCheck
+
+    terrain, placed, u_f, u_n = _placed(dog, "step5cm", None)
+    start, support = placed.state, (1, 2, 3)
+    rc = start.feet_W[list(support)].mean(axis=0) + 0.15 * u_n
+    tc = TorqueCheck(dog)
+
+    def ratio(state):
+        q = dog.q_from(state.base_position_W, state.base_quaternion_xyzw, state.joints_rad)
+        normals = terrain.normal(state.feet_W)
+        return tc.solve(q, support, terrain_mu(terrain), normals, least_squares=True).ratio
+
+    loose = Theta2(dog, terrain, support=support, options=ThetaOptions(torque_fraction=None))
+    sol = loose.solve(start, rc, u_f, u_n)
+    assert sol.feasible and ratio(sol.state) > 0.5
+    tight = Theta2(dog, terrain, support=support,
+                   options=replace(ThetaOptions(), torque_fraction=0.4))  # fmt: skip
+    sol = tight.solve(start, rc, u_f, u_n)
+    assert sol.feasible, sol.diagnosis
+    assert ratio(sol.state) <= 0.4 + 1e-4
+    assert tight._torque_problem is not None  # solved with the torque rows

@@ -128,3 +128,66 @@ def test_least_squares_torques_are_the_equality_constrained_optimum(flat_plan, l
         np.testing.assert_allclose(res.torques_nm, g[v] - a @ f, atol=2e-5)
         # it is a balancing distribution, so it needs at least the least achievable ratio
         assert res.ratio >= tc.solve(q, sup, 5.0, up).ratio - 1e-7
+
+
+def test_symbolic_least_squares_torques_equal_the_socp(flat_plan, littledog):
+    """least_squares_ratios_ca (CasADi, Theta2's torque rows) against TorqueCheck (Clarabel).
+
+    Three-leg samples of a plan, tilted normals and turned bodies: wherever the SOCP's
+    optimum lies inside the cones the two distributions agree; gravity per leg against
+    Pinocchio's generalized gravity.
+    """
+    import casadi as ca
+    from scipy.spatial.transform import Rotation
+
+    from planner.kinematics import kinematics_of
+    from planner.torques import least_squares_ratios_ca
+
+    kin = kinematics_of(littledog)
+    effort = joint_efforts_nm(littledog)
+    tc = TorqueCheck(littledog)
+    model, data = littledog.model, littledog.model.createData()
+    v = [model.joints[model.getJointId(n)].idx_v for n in littledog.joint_names]
+    pos, th = ca.SX.sym("p", 3), ca.SX.sym("th", 12)
+    rot = ca.SX.sym("R", 3, 3)
+    normals = [ca.SX.sym(f"n{i}", 3) for i in range(4)]
+    centres = kin.feet_W_ca(pos, rot, th)
+    contacts = [centres[:, i] - littledog.foot_radius_m * normals[i] for i in range(4)]
+    com = pos + ca.mtimes(rot, kin.com_B_ca(th))
+    gravity = ca.Function(
+        "g",
+        [rot, th],
+        [
+            ca.vertcat(*[kin.gravity_torque_ca(i, rot, th[3 * i : 3 * i + 3]) for i in range(4)])
+        ],  # fmt: skip
+    )
+    rng = np.random.default_rng(3)
+    three = np.flatnonzero(flat_plan.samples.contact.sum(axis=1) == 3)
+    compared = 0
+    for k in three[:: max(len(three) // 6, 1)]:
+        q = flat_plan.samples.q[k].copy()
+        sup = tuple(np.flatnonzero(flat_plan.samples.contact[k]))
+        turn = Rotation.from_rotvec(rng.normal(0.0, 0.1, 3))
+        q[3:7] = (turn * Rotation.from_quat(q[3:7])).as_quat()
+        R = Rotation.from_quat(q[3:7]).as_matrix()
+        ns = np.array([0.0, 0.0, 1.0]) + rng.normal(0.0, 0.1, (4, 3))
+        ns /= np.linalg.norm(ns, axis=1, keepdims=True)
+        np.testing.assert_allclose(
+            np.array(gravity(R, q[7:])).ravel(),
+            pin.computeGeneralizedGravity(model, data, q)[v],
+            atol=1e-12,
+        )
+        ratios, forces = least_squares_ratios_ca(
+            kin, rot, th, sup, contacts, normals, com, effort, littledog.total_mass_kg
+        )
+        f = ca.Function("f", [pos, rot, th, *normals], [ratios, *forces])
+        out = [np.array(o).ravel() for o in f(q[:3], R, q[7:], *ns)]
+        res = tc.solve(q, sup, 5.0, ns, least_squares=True)
+        assert res.status == "Solved"
+        ref = np.concatenate([res.torques_nm[3 * i : 3 * i + 3] / effort[3 * i : 3 * i + 3]
+                              for i in sup])  # fmt: skip
+        np.testing.assert_allclose(out[0], ref, atol=1e-5)
+        np.testing.assert_allclose(np.concatenate(out[1:]), res.forces_W[list(sup)].ravel(),
+                                   atol=1e-4)  # fmt: skip
+        compared += 1
+    assert compared >= 4

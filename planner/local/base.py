@@ -61,7 +61,7 @@ from planner.stability import (
     triangle_inradius_m,
 )
 from planner.state import State
-from planner.torques import TorqueCheck
+from planner.torques import COMMANDED_TORQUE_FRACTION, TorqueCheck
 from planner.trajectory import Trajectory
 
 # the time law (planner.time_law), chosen from MuJoCo runs at time scale 1 (issue 16):
@@ -88,11 +88,8 @@ DEAD_END_LATERAL_M = 0.08  # ... of the nominal placement, when the foothold is 
 ALWAYS_REACH_FRACTION = 0.95
 TARGET_RADIUS_M = 0.01  # a placed foot lands within this of its (edge-free) target [m]
 WIDE_TARGET_RADIUS_M = 0.04  # ... or this, when the leg's links forbid the near footholds
-# joint torque / URDF effort the servos may need to hold a sample, in the force distribution
-# the feed-forward commands (least sum of (torque / effort)^2, planner.torques): the least
-# achievable ratio relies on internal foot forces no servo produces (barrier75mm: 49 %
-# achievable, 102 % commanded, and the HL knee saturated and the body yawed 6 degrees)
-TORQUE_FRACTION = 0.8
+# joint torque / URDF effort the servos may need to hold a sample (planner.torques)
+TORQUE_FRACTION = COMMANDED_TORQUE_FRACTION
 # feedback (8.3) starts paths at a measured state that may already lack a margin by a
 # fraction of a millimetre; a path from it may not lose more than this
 START_SLACK_M = 1e-4
@@ -857,6 +854,8 @@ class LocalPlanner:
         ceiling = TORQUE_FRACTION
         for k, (s, q) in enumerate(zip(path, qs, strict=True)):
             sup = np.flatnonzero(s.in_contact)
+            if len(sup) == 4 and k == len(path) - 1 and len(s.support) == 3:
+                sup = np.asarray(s.support)  # a body move's end: the leg is about to lift
             tq = self.torques.solve(
                 q, sup, self.mu, self.terrain.normal(s.feet_W), least_squares=True
             )

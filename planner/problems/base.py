@@ -37,6 +37,7 @@ from planner.kinematics import kinematics_of
 from planner.lie import coords_from_pose, pose_from_coords, rotation_from_vector_ca
 from planner.stability import BALANCE_MARGIN_M
 from planner.state import State
+from planner.torques import COMMANDED_TORQUE_FRACTION
 
 FEASIBILITY_TOL = 1e-6  # [m, rad, N]: an independent violation above this is infeasible
 CLEARANCE_ACTIVE_POINTS = 8  # points of P held besides its bottom corners (2 per quarter)
@@ -68,6 +69,15 @@ class ThetaOptions:
     balance_margin_m : on three legs, the COM at least this far (horizontally) inside every
         edge of the support triangle (:mod:`planner.stability`: chosen from MuJoCo falls).
     sigma_floor : lower bound of sigma1, sigma2, sigma5 (orientation stays forward and up).
+    torque_fraction : on three legs, Theta2's pose needs no support joint beyond this
+        fraction of its URDF effort in the force distribution the servos are commanded
+        (effort-weighted least squares inside the cones, :mod:`planner.torques`); the
+        planner's paths allow the same (``COMMANDED_TORQUE_FRACTION``). A pose beyond it is
+        solved again with the torque rows (:func:`planner.torques.least_squares_ratios_ca`).
+        None: off. Without it Theta2 chose three-leg stances whose hind knee needed 93-140 %
+        of its 0.6 N m on an 18 degree incline and an 8 cm step down, and the swing from
+        there failed. 0.75 (a margin below the paths') cost the 10 cm climb
+        (``tests/test_climb.py``): the recursive planner ran out of time.
     max_tilt_rad : Theta2's body z axis at most this far from u_n (sigma2 >= its cosine);
         None: only ``sigma_floor``. The objective alone lets the body roll 17-29 degrees
         where the constraints press (edges, a stretched leg), but a 20 degree bound made
@@ -91,6 +101,7 @@ class ThetaOptions:
     balance_margin_m: float = BALANCE_MARGIN_M
     sigma_floor: float = 0.05
     max_tilt_rad: float | None = None
+    torque_fraction: float | None = COMMANDED_TORQUE_FRACTION
     whole_body_com: bool = True
     friction_eps_N: float = 1e-3
     max_iter: int = 150
@@ -577,12 +588,24 @@ class ThetaProblem:
     def _diagnose(self, status: str, violations: dict[str, float]) -> str:
         """Name the violated groups, most severe first (each relative to its unit scale)."""
         mg = self.robot.total_mass_kg * 9.81
-        scale = {"forces": 0.01 * mg, "joint_limits": 0.01, "orientation": 0.01, "slope": 0.01}
+        scale = {
+            "forces": 0.01 * mg,
+            "joint_limits": 0.01,
+            "orientation": 0.01,
+            "slope": 0.01,
+            "torque": 0.01,
+        }
         bad = {k: v for k, v in violations.items() if not v <= FEASIBILITY_TOL}
         if not bad:
             return f"{self.name}: IPOPT status {status}"
         order = sorted(bad, key=lambda k: -bad[k] / scale.get(k, 1e-3))
-        unit = {"forces": "N", "joint_limits": "rad", "orientation": "rad", "slope": ""}
+        unit = {
+            "forces": "N",
+            "joint_limits": "rad",
+            "orientation": "rad",
+            "slope": "",
+            "torque": "of the effort",
+        }
         listed = ", ".join(f"'{k}' by {bad[k]:.3g} {unit.get(k, 'm')}".rstrip() for k in order)
         return f"{self.name}: IPOPT status {status}; violated: {listed}" + self._explain(order[0])
 
@@ -602,6 +625,8 @@ class ThetaProblem:
             "slope": ": every reachable foothold is steeper than atan(mu)",
             "target_radius": ": no foothold within the target radius is reachable",
             "swing_ready": ": the swinging leg's next foothold is out of its reach from here",
+            "torque": ": a support joint would need more than torque_fraction of its effort"
+            " limit on three legs",
         }
         for key, text in hints.items():
             if group.startswith(key):

@@ -26,6 +26,13 @@ joints at touch-down, must put its foot on the target's sphere centre from this 
 with its thigh and shank clear of the terrain (planner.links margins). Stepping down an
 edge, the body then moves to where the shank can pass the edge, which Theta3 (body fixed)
 cannot do.
+
+On three legs the pose must also be one the servos can hold: no support joint beyond
+``torque_fraction`` of its URDF effort in the commanded (effort-weighted least-squares)
+force distribution, checked with Clarabel. Those rows cost 2-3x per solve, so a pose that
+fails the check only is solved again, from itself, by a sibling NLP that has them
+(``torque_rows``): the forces are the KKT solution in closed form (exact derivatives) and
+are kept inside the friction cones, where they equal the check's.
 """
 
 from __future__ import annotations
@@ -48,10 +55,14 @@ from planner.problems.base import (
     state_from_pose_coords,
 )
 from planner.state import S0, State
+from planner.torques import TorqueCheck, joint_efforts_nm, least_squares_ratios_ca
 
 SWING_REACH_FRACTION = 0.92  # swing-ready: hip within this fraction of reach of the target
 NO_SWING_TARGET_M = 1e3  # reach bound that switches the swing-ready constraint off
 STANCE_REACH_FRACTION = 0.96  # body-move ends keep every hip within this of its foot's reach
+# the independent torque check is an SOCP (Clarabel) solved to about this accuracy in
+# tau / effort; IPOPT holds the bound to 1e-9 and sits on it when it is active
+TORQUE_SOCP_TOL = 1e-4
 LANDING_WEIGHT = 0.1  # gamma of the landing joints' closeness to theta_nor (keeps them defined)
 
 
@@ -69,11 +80,14 @@ class Theta2(ThetaProblem):
         options=None,
         mu: float = 0.7,
         landing: bool = False,
+        torque_rows: bool = False,
     ):
         self.support = tuple(sorted(int(i) for i in support))
         if len(self.support) not in (3, 4):
             raise ValueError(f"support must name 3 or 4 legs, got {support!r}")
         self.landing = bool(landing) and len(self.support) == 3
+        self.torque_rows = bool(torque_rows)
+        self._torque_problem = None  # the same NLP with the torque rows, built when needed
         super().__init__(robot, terrain, options or ThetaOptions(), mu)
 
     def _declare(self) -> None:
@@ -154,6 +168,8 @@ class Theta2(ThetaProblem):
                     np.inf,
                 )
             self.maximise_log("sigma5", o.weights[4], s5)
+            if len(self.support) == 3 and o.torque_fraction is not None and self.torque_rows:
+                self._constrain_torques(R, th, feet_cols, normal_cols, com)
             if self.landing:
                 # balance holds with the swing leg's mass at touch-down too (the COM set of
                 # feasible eq. 5 forces is convex: the swing's COM between the two holds)
@@ -179,6 +195,51 @@ class Theta2(ThetaProblem):
         self.maximise_log("sigma3", o.weights[2], sigma3_ca(d_theta, o))
         if not self.fix_com:
             self.maximise_log("sigma4", o.weights[3], gaussian_ca(com - rc, o.com_length_m))
+
+    def _constrain_torques(self, R, th, feet_cols, normal_cols, com) -> None:
+        """Support joints within ``torque_fraction`` of their effort (commanded forces).
+
+        The servos get the effort-weighted least-squares forces as feed-forward
+        (:mod:`planner.torques`); a joint they load beyond its effort saturates. Joints
+        without a finite effort are not constrained (and weigh as the strongest one).
+        """
+        effort = joint_efforts_nm(self.robot)
+        finite = effort[np.isfinite(effort)]
+        if not finite.size:
+            return
+        weighted = np.where(np.isfinite(effort), effort, finite.max())
+        ratios, forces = least_squares_ratios_ca(
+            self.kin,
+            R,
+            th,
+            self.support,
+            [feet_cols[:, i] for i in range(4)],
+            [normal_cols[:, i] for i in range(4)],
+            com,
+            weighted,
+            self.robot.total_mass_kg,
+        )
+        rows = [
+            3 * n + j
+            for n, i in enumerate(self.support)
+            for j in range(3)
+            if np.isfinite(effort[3 * i + j])
+        ]
+        frac = float(self.options.torque_fraction)
+        self.constrain("torque", ratios[rows], -frac, frac)
+        # those forces inside the friction cones: the commanded distribution is then this
+        # one (the SOCP's optimum over the cones is the unconstrained one)
+        F = [ca.SX.zeros(3, 1)] * 4
+        for n, i in enumerate(self.support):
+            F[i] = forces[n]
+        cone = statics.friction_cone_residuals_ca(
+            F,
+            self.mu,
+            self.support,
+            [normal_cols[:, i] for i in range(4)],
+            eps_N=self.options.friction_eps_N,
+        )
+        self.constrain("torque_forces", cone, 0.0, np.inf)
 
     def _eq5_forces_ca(self, feet_cols, com):
         """Eq. 3-5 forces with the footholds fixed: linear in the COM.
@@ -328,6 +389,17 @@ class Theta2(ThetaProblem):
             again = self.solve_packed(p, self.initial_guess(start, p, turned=True))
             if again.feasible or again.max_violation() < sol.max_violation():
                 sol = again
+        if not sol.feasible and sol.violations.get("torque", 0.0) > 0.0 and sol.x is not None:
+            # the torque rows cost 2-3x per solve and bind only where a stance is heavily
+            # loaded (inclines, steps): solved with them, from this pose, only then
+            if self._torque_problem is None:
+                self._torque_problem = Theta2(
+                    self.robot, self.terrain, self.support, self.options, self.mu,
+                    self.landing, torque_rows=True,
+                )  # fmt: skip
+            again = self._torque_problem.solve_packed(p, sol.x)
+            if again.feasible or again.max_violation() < sol.max_violation():
+                sol = again
         sol.state.info["rc_star"] = np.asarray(rc_star_W, float)
         if self.landing and sol.x is not None:
             # the touch-down joints this pose was found with: Theta3's starting point, so
@@ -336,6 +408,15 @@ class Theta2(ThetaProblem):
             land = self.x_block(sol.x, "theta_land").copy()
             sol.state.info["landing"] = (np.asarray(swing_target_W, float).copy(), land)
         return sol
+
+    def _torque_ratio(self, state: State) -> float:
+        """The commanded distribution's largest tau / effort (Pinocchio, Clarabel), or 0."""
+        if not hasattr(self, "_torques"):
+            self._torques = TorqueCheck(self.robot)
+        q = self.robot.q_from(state.base_position_W, state.base_quaternion_xyzw, state.joints_rad)
+        normals = self.terrain.normal(state.feet_W)
+        res = self._torques.solve(q, self.support, self.mu, normals, least_squares=True)
+        return float(res.ratio) if np.isfinite(res.ratio) else float("inf")
 
     def _state_from_x(self, x: np.ndarray, p: np.ndarray) -> State:
         eps = np.concatenate([self.x_block(x, "p"), self.x_block(x, "phi")])
@@ -394,4 +475,7 @@ class Theta2(ThetaProblem):
         if self.options.forces and not self.fix_com and len(self.support) == 3:
             have = stability.support_margin_m(state.feet_W[list(self.support)], ck.com_W(state))
             v["balance_margin"] = max(self.options.balance_margin_m - have, 0.0)
+            if self.options.torque_fraction is not None:
+                over = self._torque_ratio(state) - self.options.torque_fraction
+                v["torque"] = max(over - TORQUE_SOCP_TOL, 0.0)
         return v
