@@ -821,9 +821,7 @@ class LocalPlanner:
             return why
         coms = [self.check.com_W(s) for s in path]  # Pinocchio, once per sample
         for k, s in enumerate(path):
-            sup = np.flatnonzero(s.in_contact)
-            if len(sup) == 4 and k == len(path) - 1 and len(s.support) == 3:
-                sup = np.asarray(s.support)  # a body move's end: the leg is about to lift
+            sup = _holding_legs(path, k)
             if len(sup) != 3:
                 continue
             tip = support_margin_m(s.feet_W[sup], coms[k])
@@ -853,9 +851,7 @@ class LocalPlanner:
                 )
         ceiling = TORQUE_FRACTION
         for k, (s, q) in enumerate(zip(path, qs, strict=True)):
-            sup = np.flatnonzero(s.in_contact)
-            if len(sup) == 4 and k == len(path) - 1 and len(s.support) == 3:
-                sup = np.asarray(s.support)  # a body move's end: the leg is about to lift
+            sup = _holding_legs(path, k)
             tq = self.torques.solve(
                 q, sup, self.mu, self.terrain.normal(s.feet_W), least_squares=True
             )
@@ -1365,6 +1361,19 @@ class LocalPlanner:
         for s, t in zip(path[1:], at_s, strict=True):
             samples.append(s)
             times.append(float(t))
+
+
+def _holding_legs(path: list[State], k: int) -> np.ndarray:
+    """The legs that carry sample ``k`` of a path: its contacts.
+
+    At a body move's end (four feet down, a three-leg support) the three that will hold it
+    when the fourth lifts: balance and torque are judged on them.
+    """
+    s = path[k]
+    sup = np.flatnonzero(s.in_contact)
+    if len(sup) == 4 and k == len(path) - 1 and len(s.support) == 3:
+        return np.asarray(s.support)
+    return sup
 
 
 def _timed(settings: LocalSettings, robot) -> LocalSettings:
