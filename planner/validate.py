@@ -192,7 +192,10 @@ class CheckReport:
     (with the least demanding forces); ``min_balance_margin_N``:
     least force margin of the statics test; ``min_tip_margin_m``: least horizontal
     distance of the COM inside a three-leg support triangle (a figure, not a test: the
-    planner keeps :data:`planner.stability.PATH_BALANCE_MARGIN_M`); ``max_slip_m``:
+    planner keeps :data:`planner.stability.PATH_BALANCE_MARGIN_M`);
+    ``min_sway_stiffness_N_per_m``: least sway stiffness of a three-leg stance where it
+    begins, on the robot's servos with the commanded feed-forward (a figure:
+    :mod:`planner.stiffness`; the planner keeps its bound); ``max_slip_m``:
     largest stance-foot sliding between samples (travel minus rolling). NaN when there was
     nothing to measure.
     """
@@ -206,6 +209,7 @@ class CheckReport:
     min_balance_margin_N: float = math.nan
     min_tip_margin_m: float = math.nan
     max_torque_ratio: float = math.nan
+    min_sway_stiffness_N_per_m: float = math.nan
     max_slip_m: float = math.nan
     elapsed_s: float = 0.0
     tolerances: CheckTolerances = field(default_factory=CheckTolerances)
@@ -227,7 +231,8 @@ class CheckReport:
             f"{_mm(self.min_leg_clearance_m)}, min balance margin "
             f"{self.min_balance_margin_N:.3g} N, min three-leg tip margin "
             f"{_mm(self.min_tip_margin_m)}, max joint torque "
-            f"{100 * self.max_torque_ratio:.0f} % of its limit, max stance slip "
+            f"{100 * self.max_torque_ratio:.0f} % of its limit, min three-leg sway "
+            f"stiffness {self.min_sway_stiffness_N_per_m:.0f} N/m, max stance slip "
             f"{_mm(self.max_slip_m)}"
         )
         head = f"checked {self.n_samples} samples and {self.n_keyframes} keyframes"
@@ -689,6 +694,7 @@ class _Checker:
         self.swing_clearance(centres, report)
         self.balance(contacts, coms, report)
         self.joint_torques(contacts, report)
+        _sway(self, report)
 
     def body_clearance(self, report: CheckReport) -> None:
         """Body box P vs the sharp terrain: a tile bound first, exact points where close."""
@@ -932,6 +938,29 @@ def _joint_torques(ck: _Checker, contacts: _Array, report: CheckReport) -> None:
                 "least demanding balancing forces in the friction cones",
             )
     report.max_torque_ratio = worst if math.isfinite(worst) else math.nan
+
+
+def _sway(ck: _Checker, report: CheckReport) -> None:
+    """The least sway stiffness where a three-leg stance begins (a figure, not a test)."""
+    from planner.stiffness import sway_stiffness_of
+    from planner.torques import holding_load
+
+    sm = ck.plan.samples
+    down = np.asarray(sm.contact, bool)
+    starts = [
+        k for k in range(len(sm)) if down[k].sum() == 3 and (k == 0 or down[k - 1].sum() == 4)
+    ]
+    if not starts:
+        return
+    sway = sway_stiffness_of(ck.robot)
+    tau = holding_load(TorqueCheck(ck.robot), sm.q[starts], down[starts], ck.mu, ck.terrain)[1]
+    least = math.inf
+    for k, tk in zip(starts, tau, strict=True):
+        q = sm.q[k]
+        R = pin.Quaternion(q[6], q[3], q[4], q[5]).toRotationMatrix()
+        st = sway.stance(q[:3], R, ck.robot.joints_from_q(q), np.flatnonzero(down[k]), tk)
+        least = min(least, st.least)
+    report.min_sway_stiffness_N_per_m = least
 
 
 def _order(v: Violation) -> tuple[int, int]:

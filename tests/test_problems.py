@@ -362,3 +362,43 @@ def test_theta2_keeps_the_commanded_torques_within_the_fraction(dog):
     assert sol.feasible, sol.diagnosis
     assert ratio(sol.state) <= 0.4 + 1e-4
     assert tight._torque_problem is not None  # solved with the torque rows
+
+
+def test_theta2_stiffens_a_three_leg_stance_when_asked(dog):
+    """Straddling a step, Theta2's three-leg pose has some sway stiffness on the servos;
+    asked for 1.2 times it, the cuts find a pose that the independent Hessian confirms."""
+    from dataclasses import replace
+
+    from planner.stiffness import sway_stiffness_of
+    from planner.torques import TorqueCheck
+
+    terrain, placed, u_f, u_n = _placed(dog, "step5cm", None)
+    start, support = placed.state, (1, 2, 3)
+    rc = start.feet_W[list(support)].mean(axis=0) + 0.15 * u_n
+    sway, tc = sway_stiffness_of(dog), TorqueCheck(dog)
+
+    def stiffness(state):
+        q = dog.q_from(state.base_position_W, state.base_quaternion_xyzw, state.joints_rad)
+        normals = terrain.normal(state.feet_W)
+        tau = tc.solve(q, support, terrain_mu(terrain), normals, least_squares=True).torques_nm
+        R = state.base_rotation_W
+        return sway.stance(state.base_position_W, R, state.joints_rad, support, tau).least
+
+    loose = Theta2(dog, terrain, support=support, options=ThetaOptions(sway_stiffness=None))
+    sol = loose.solve(start, rc, u_f, u_n)
+    assert sol.feasible
+    have = stiffness(sol.state)
+    assert have > sway.minimum_n_per_m  # the default bound holds here already
+    want = 1.2 * have / sway.bound_n_per_m(1.0)
+    tight = Theta2(dog, terrain, support=support,
+                   options=replace(ThetaOptions(), sway_stiffness=want))  # fmt: skip
+    sol = tight.solve(start, rc, u_f, u_n)
+    assert sol.feasible, sol.diagnosis
+    assert stiffness(sol.state) >= sway.bound_n_per_m(want)
+    assert tight._sway_problem is not None  # solved with the sway rows
+    # a feasible pose below the aim is made stiffer where a stiffer one exists
+    aiming = Theta2(dog, terrain, support=support,
+                    options=replace(ThetaOptions(), sway_stiffness_aim=want))  # fmt: skip
+    sol = aiming.solve(start, rc, u_f, u_n)
+    assert sol.feasible, sol.diagnosis
+    assert stiffness(sol.state) >= sway.bound_n_per_m(want)

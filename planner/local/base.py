@@ -61,6 +61,7 @@ from planner.stability import (
     triangle_inradius_m,
 )
 from planner.state import State
+from planner.stiffness import sway_stiffness_of
 from planner.torques import COMMANDED_TORQUE_FRACTION, TorqueCheck
 from planner.trajectory import Trajectory
 
@@ -864,6 +865,21 @@ class LocalPlanner:
                     f"effort limit at sample {k} of the path (more than "
                     f"{100 * TORQUE_FRACTION:.0f} %)"
                 )
+            bound = self.settings.theta.sway_stiffness
+            if k == len(path) - 1 and len(sup) == 3 and bound is not None:
+                # the three-leg stance the path ends in holds on the servos (Theta2's
+                # bound, on the rolled feet the path ends on)
+                sway = sway_stiffness_of(self.robot)
+                have = sway.stance(
+                    s.base_position_W, s.base_rotation_W, s.joints_rad, sup,
+                    np.nan_to_num(tq.torques_nm),
+                ).least  # fmt: skip
+                need = sway.bound_n_per_m(bound)
+                if have < need:
+                    return (
+                        f"the three-leg stance at the end of the path sways: stiffness "
+                        f"{have:.0f} N/m on the servos (< {need:.0f} N/m)"
+                    )
         return ""
 
     def _between_samples(self, path: list[State], qs: list, links) -> str:

@@ -37,6 +37,7 @@ from planner.kinematics import kinematics_of
 from planner.lie import coords_from_pose, pose_from_coords, rotation_from_vector_ca
 from planner.stability import BALANCE_MARGIN_M
 from planner.state import State
+from planner.stiffness import SWAY_STIFFNESS_AIM_MG_PER_L, SWAY_STIFFNESS_MIN_MG_PER_L
 from planner.torques import COMMANDED_TORQUE_FRACTION
 
 FEASIBILITY_TOL = 1e-6  # [m, rad, N]: an independent violation above this is infeasible
@@ -78,6 +79,13 @@ class ThetaOptions:
         of its 0.6 N m on an 18 degree incline and an 8 cm step down, and the swing from
         there failed. 0.75 (a margin below the paths') cost the 10 cm climb
         (``tests/test_climb.py``): the recursive planner ran out of time.
+    sway_stiffness : on three legs, Theta2's pose has at least this sway stiffness on the
+        robot's servos, in units of m g / L (:mod:`planner.stiffness`; the feed-forward:
+        the commanded torques); a pose below it is solved again with the stiffness as
+        rows. None: off. Without it the two named and hard courses that fell in MuJoCo
+        open loop fell from the plan's softest three-leg stances (44-83 N/m).
+    sway_stiffness_aim : ... and a feasible pose below this is solved again with rows that
+        ask it, kept where they find one (None: not tried).
     max_tilt_rad : Theta2's body z axis at most this far from u_n (sigma2 >= its cosine);
         None: only ``sigma_floor``. The objective alone lets the body roll 17-29 degrees
         where the constraints press (edges, a stretched leg), but a 20 degree bound made
@@ -102,6 +110,8 @@ class ThetaOptions:
     sigma_floor: float = 0.05
     max_tilt_rad: float | None = None
     torque_fraction: float | None = COMMANDED_TORQUE_FRACTION
+    sway_stiffness: float | None = SWAY_STIFFNESS_MIN_MG_PER_L
+    sway_stiffness_aim: float | None = SWAY_STIFFNESS_AIM_MG_PER_L
     whole_body_com: bool = True
     friction_eps_N: float = 1e-3
     max_iter: int = 150
@@ -594,6 +604,7 @@ class ThetaProblem:
             "orientation": 0.01,
             "slope": 0.01,
             "torque": 0.01,
+            "sway": 0.01,
         }
         bad = {k: v for k, v in violations.items() if not v <= FEASIBILITY_TOL}
         if not bad:
@@ -605,6 +616,7 @@ class ThetaProblem:
             "orientation": "rad",
             "slope": "",
             "torque": "of the effort",
+            "sway": "of the least sway stiffness",
         }
         listed = ", ".join(f"'{k}' by {bad[k]:.3g} {unit.get(k, 'm')}".rstrip() for k in order)
         return f"{self.name}: IPOPT status {status}; violated: {listed}" + self._explain(order[0])
@@ -627,6 +639,7 @@ class ThetaProblem:
             "swing_ready": ": the swinging leg's next foothold is out of its reach from here",
             "torque": ": a support joint would need more than torque_fraction of its effort"
             " limit on three legs",
+            "sway": ": the three-leg stance is too soft on the servos (planner.stiffness)",
         }
         for key, text in hints.items():
             if group.startswith(key):

@@ -55,6 +55,7 @@ from planner.problems.base import (
     state_from_pose_coords,
 )
 from planner.state import S0, State
+from planner.stiffness import joint_sway_matrix_ca, sway_stiffness_of
 from planner.torques import TorqueCheck, joint_efforts_nm, least_squares_ratios_ca
 
 SWING_REACH_FRACTION = 0.92  # swing-ready: hip within this fraction of reach of the target
@@ -64,6 +65,23 @@ STANCE_REACH_FRACTION = 0.96  # body-move ends keep every hip within this of its
 # tau / effort; IPOPT holds the bound to 1e-9 and sits on it when it is active
 TORQUE_SOCP_TOL = 1e-4
 LANDING_WEIGHT = 0.1  # gamma of the landing joints' closeness to theta_nor (keeps them defined)
+SWAY_ROUNDS = 3  # re-solves with the sway-stiffness rows, at most (each refreezes G)
+SWAY_SLACK = 0.10  # the rows ask this much more than the bound (their G part is frozen)
+_TRIL = np.tril_indices(6)  # the 21 entries of a symmetric 6 x 6 matrix's lower triangle
+
+
+def _sway_of(sol: ThetaSolution) -> float:
+    """The sway stiffness [N/m] the independent check found for a solution's pose."""
+    return float(sol.state.info.get("sway_n_per_m", np.inf)) if sol.state is not None else -np.inf
+
+
+def _symmetric(tril):
+    """A symmetric 6 x 6 CasADi matrix from its 21 lower-triangle entries (``_TRIL`` order)."""
+    M = ca.SX.zeros(6, 6)
+    for n, (i, j) in enumerate(zip(*_TRIL, strict=True)):
+        M[i, j] = tril[n]
+        M[j, i] = tril[n]
+    return M
 
 
 class Theta2(ThetaProblem):
@@ -81,13 +99,17 @@ class Theta2(ThetaProblem):
         mu: float = 0.7,
         landing: bool = False,
         torque_rows: bool = False,
+        sway_rows: bool = False,
     ):
+        # torque_rows, sway_rows: the siblings that :meth:`solve` uses where a pose fails
         self.support = tuple(sorted(int(i) for i in support))
         if len(self.support) not in (3, 4):
             raise ValueError(f"support must name 3 or 4 legs, got {support!r}")
         self.landing = bool(landing) and len(self.support) == 3
         self.torque_rows = bool(torque_rows)
+        self.sway_rows = bool(sway_rows) and self.torque_rows
         self._torque_problem = None  # the same NLP with the torque rows, built when needed
+        self._sway_problem = None  # ... and with the sway-stiffness rows
         super().__init__(robot, terrain, options or ThetaOptions(), mu)
 
     def _declare(self) -> None:
@@ -170,6 +192,8 @@ class Theta2(ThetaProblem):
             self.maximise_log("sigma5", o.weights[4], s5)
             if len(self.support) == 3 and o.torque_fraction is not None and self.torque_rows:
                 self._constrain_torques(R, th, feet_cols, normal_cols, com)
+            if len(self.support) == 3 and o.sway_stiffness is not None and self.sway_rows:
+                self._constrain_sway(pos, R, th, ca.reshape(centres, 3, 4))
             if self.landing:
                 # balance holds with the swing leg's mass at touch-down too (the COM set of
                 # feasible eq. 5 forces is convex: the swing's COM between the two holds)
@@ -241,6 +265,30 @@ class Theta2(ThetaProblem):
         )
         self.constrain("torque_forces", cone, 0.0, np.inf)
 
+    def _constrain_sway(self, pos, R, th, centre_cols) -> None:
+        """The sway-stiffness bound as rows (:mod:`planner.stiffness`).
+
+        H = K_joint(x) + G with K_joint the servos' part (exact, a function of the pose
+        and joints) and G the gravity and feed-forward part, frozen at the pose being
+        improved (parameter ``sway_G``, lower triangle in units of the bound k_min):
+        H / k_min - t I = L L^T, L lower triangular (21 variables ``sway_L``), so H is at
+        least t k_min in every direction (parameter ``sway_target``: t).
+        """
+        sway = sway_stiffness_of(self.robot)
+        need = sway.bound_n_per_m(self.options.sway_stiffness)
+        G = _symmetric(self.par("sway_G", len(_TRIL[0])))
+        target = self.par("sway_target", 1)
+        factor = self.var("sway_L", len(_TRIL[0]))
+        L = ca.SX.zeros(6, 6)
+        for n, (i, j) in enumerate(zip(*_TRIL, strict=True)):
+            L[i, j] = factor[n]
+        centres = [centre_cols[:, i] for i in range(4)]
+        K = joint_sway_matrix_ca(
+            self.kin, sway.kp, sway.length_m, pos, R, th, centres, self.support
+        )
+        M = K / need + G - target * ca.DM.eye(6) - ca.mtimes(L, L.T)
+        self.constrain("sway_psd", ca.vertcat(*[M[i, j] for i, j in zip(*_TRIL, strict=True)]))
+
     def _eq5_forces_ca(self, feet_cols, com):
         """Eq. 3-5 forces with the footholds fixed: linear in the COM.
 
@@ -297,6 +345,8 @@ class Theta2(ThetaProblem):
             if self.landing and swing_target_W is None:
                 raise ValueError("Theta2(landing=True) needs the swing target")
             values |= {"swing_target_W": target, "swing_reach_m": [reach]}
+        if "sway_G" in self._p_slices:  # set by ``_solve_sibling``
+            values |= {"sway_G": np.zeros(len(_TRIL[0])), "sway_target": [0.0]}
         if "support_S_inv" in self._p_slices:
             centroid, s_inv = self.support_geometry(start.feet_W)
             values |= {"support_centroid": centroid, "support_S_inv": s_inv.T.ravel()}
@@ -389,17 +439,19 @@ class Theta2(ThetaProblem):
             again = self.solve_packed(p, self.initial_guess(start, p, turned=True))
             if again.feasible or again.max_violation() < sol.max_violation():
                 sol = again
-        if not sol.feasible and sol.violations.get("torque", 0.0) > 0.0 and sol.x is not None:
+        if (
+            not sol.feasible
+            and sol.x is not None
+            and (sol.violations.get("torque", 0.0) > 0.0 or sol.violations.get("sway", 0.0) > 0.0)
+        ):
             # the torque rows cost 2-3x per solve and bind only where a stance is heavily
-            # loaded (inclines, steps): solved with them, from this pose, only then
-            if self._torque_problem is None:
-                self._torque_problem = Theta2(
-                    self.robot, self.terrain, self.support, self.options, self.mu,
-                    self.landing, torque_rows=True,
-                )  # fmt: skip
-            again = self._torque_problem.solve_packed(p, sol.x)
-            if again.feasible or again.max_violation() < sol.max_violation():
-                sol = again
+            # loaded (inclines, steps), the sway cuts only where it is soft: solved with
+            # them, from this pose, only then
+            sol = self._solve_sibling(sol, p)
+        aim = self.options.sway_stiffness_aim
+        if sol.feasible and aim is not None and self.options.sway_stiffness is not None:
+            if _sway_of(sol) < sway_stiffness_of(self.robot).bound_n_per_m(aim):
+                sol = self._solve_sibling(sol, p, aim=aim)  # stiffer, where it finds one
         sol.state.info["rc_star"] = np.asarray(rc_star_W, float)
         if self.landing and sol.x is not None:
             # the touch-down joints this pose was found with: Theta3's starting point, so
@@ -409,14 +461,88 @@ class Theta2(ThetaProblem):
             sol.state.info["landing"] = (np.asarray(swing_target_W, float).copy(), land)
         return sol
 
-    def _torque_ratio(self, state: State) -> float:
-        """The commanded distribution's largest tau / effort (Pinocchio, Clarabel), or 0."""
+    def _solve_sibling(
+        self, sol: ThetaSolution, p: np.ndarray, aim: float | None = None
+    ) -> ThetaSolution:
+        """Re-solve a pose that failed the torque or sway check with their rows.
+
+        ``aim`` (m g / L): a feasible pose, solved again to be this stiff. The sway rows
+        freeze their gravity part at the latest pose: up to ``SWAY_ROUNDS`` solves, each
+        from the last. The best solution (feasible, or least violating) is kept.
+        """
+        sway = aim is not None or sol.violations.get("sway", 0.0) > 0.0
+        sib = self._sway_problem if sway else self._torque_problem
+        if sib is None:
+            sib = Theta2(
+                self.robot, self.terrain, self.support, self.options, self.mu,
+                self.landing, torque_rows=True, sway_rows=sway,
+            )  # fmt: skip
+            if sway:
+                self._sway_problem = sib
+            else:
+                self._torque_problem = sib
+        p2 = np.zeros(sib._p_sym.numel())
+        for name, sl in self._p_slices.items():
+            p2[sib._p_slices[name]] = p[sl]
+        if not sway:
+            again = sib.solve_packed(p2, sol.x)
+            return again if again.feasible or again.max_violation() < sol.max_violation() else sol
+        floor = self.options.sway_stiffness
+        need = sway_stiffness_of(self.robot).bound_n_per_m(floor)
+        target = (1.0 + SWAY_SLACK) * (1.0 if aim is None else aim / floor)
+        best, latest, x = sol, sol, sol.x
+        for _ in range(SWAY_ROUNDS):
+            st = self._stiffness(latest.state)
+            G = (st.hessian - st.joint_part) / need
+            M = st.joint_part / need + G - target * np.eye(6)
+            shift = max(0.0, -float(np.linalg.eigvalsh(M)[0])) + 0.05
+            L = np.linalg.cholesky(M + shift * np.eye(6))
+            p2[sib._p_slices["sway_G"]] = G[_TRIL]
+            p2[sib._p_slices["sway_target"]] = target
+            x2 = np.zeros(sib._x_sym.numel())
+            for name, sl in self._x_slices.items():
+                x2[sib._x_slices[name]] = x[sl]
+            x2[sib._x_slices["sway_L"]] = L[_TRIL]
+            again = sib.solve_packed(p2, x2)
+            if again.state is None or again.x is None:
+                break
+            again.x = np.concatenate([again.x[sib._x_slices[n]] for n in self._x_slices])
+            if aim is None:
+                if again.feasible or again.max_violation() < best.max_violation():
+                    best = again
+                if again.feasible or again.violations.get("sway", 0.0) <= 0.0:
+                    break  # feasible, or what is left is not the sway bound
+            else:  # improving a feasible pose: keep only feasible, stiffer ones
+                if not again.feasible:
+                    break
+                if _sway_of(again) > _sway_of(best):
+                    best = again
+                if _sway_of(again) >= sway_stiffness_of(self.robot).bound_n_per_m(aim):
+                    break
+            latest, x = again, again.x
+        return best
+
+    def _commanded(self, state: State):
+        """The commanded force distribution's torques (:class:`TorqueFeasibility`, Clarabel)."""
         if not hasattr(self, "_torques"):
             self._torques = TorqueCheck(self.robot)
         q = self.robot.q_from(state.base_position_W, state.base_quaternion_xyzw, state.joints_rad)
         normals = self.terrain.normal(state.feet_W)
-        res = self._torques.solve(q, self.support, self.mu, normals, least_squares=True)
+        return self._torques.solve(q, self.support, self.mu, normals, least_squares=True)
+
+    def _torque_ratio(self, state: State) -> float:
+        """The commanded distribution's largest tau / effort (Pinocchio, Clarabel), or 0."""
+        res = self._commanded(state)
         return float(res.ratio) if np.isfinite(res.ratio) else float("inf")
+
+    def _stiffness(self, state: State, torques_nm=None):
+        """The sway stiffness of a three-leg pose, the commanded torques as feed-forward."""
+        if torques_nm is None:
+            torques_nm = self._commanded(state).torques_nm
+        return sway_stiffness_of(self.robot).stance(
+            state.base_position_W, state.base_rotation_W, state.joints_rad, self.support,
+            np.nan_to_num(torques_nm),
+        )  # fmt: skip
 
     def _state_from_x(self, x: np.ndarray, p: np.ndarray) -> State:
         eps = np.concatenate([self.x_block(x, "p"), self.x_block(x, "phi")])
@@ -475,7 +601,16 @@ class Theta2(ThetaProblem):
         if self.options.forces and not self.fix_com and len(self.support) == 3:
             have = stability.support_margin_m(state.feet_W[list(self.support)], ck.com_W(state))
             v["balance_margin"] = max(self.options.balance_margin_m - have, 0.0)
+            res = None
             if self.options.torque_fraction is not None:
-                over = self._torque_ratio(state) - self.options.torque_fraction
-                v["torque"] = max(over - TORQUE_SOCP_TOL, 0.0)
+                res = self._commanded(state)
+                ratio = float(res.ratio) if np.isfinite(res.ratio) else float("inf")
+                v["torque"] = max(ratio - self.options.torque_fraction - TORQUE_SOCP_TOL, 0.0)
+            if self.options.sway_stiffness is not None:
+                if res is None:
+                    res = self._commanded(state)
+                need = sway_stiffness_of(self.robot).bound_n_per_m(self.options.sway_stiffness)
+                have = self._stiffness(state, res.torques_nm).least
+                state.info["sway_n_per_m"] = have
+                v["sway"] = max((need - have) / need, 0.0)
         return v
