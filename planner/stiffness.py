@@ -176,6 +176,11 @@ class SwayStiffness:
         )
         hess, grad, joint_part = (np.array(o, dtype=float) for o in out)
         hess = 0.5 * (hess + hess.T)
+        if not (np.all(np.isfinite(hess)) and np.all(np.isfinite(joint_part))):
+            # a singular support leg (its Jacobian): no stiffness can be certified
+            return StanceStiffness(
+                np.full(6, -np.inf), np.eye(6), hess, joint_part, grad.ravel(), self.length_m
+            )
         w, U = np.linalg.eigh(hess)
         return StanceStiffness(w, U, hess, joint_part, grad.ravel(), self.length_m)
 

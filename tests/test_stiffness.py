@@ -189,3 +189,16 @@ def test_check_reports_the_least_three_leg_sway_stiffness(short_flat_walk):
     assert report.min_sway_stiffness_N_per_m == pytest.approx(least, rel=1e-9)
     assert report.min_sway_stiffness_N_per_m > sway.minimum_n_per_m  # the planner's bound
     assert "sway stiffness" in report.summary()
+
+
+def test_no_finite_hessian_certifies_no_stiffness(stance):
+    """Where the Hessian is not finite (a singular leg, a bad feed-forward) the least
+    eigenvalue is -inf, never NaN, so every bound fails."""
+    plan, q, support, tau = stance
+    robot = plan.load_robot()
+    p0, R0, th0 = _pose(robot, q)
+    bad = tau.copy()
+    bad[3 * support[0]] = np.nan
+    st = SwayStiffness(robot).stance(p0, R0, th0, support, bad)
+    assert st.least == -np.inf
+    assert not st.least >= SwayStiffness(robot).minimum_n_per_m

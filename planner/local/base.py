@@ -875,10 +875,11 @@ class LocalPlanner:
                     np.nan_to_num(tq.torques_nm),
                 ).least  # fmt: skip
                 need = sway.bound_n_per_m(bound)
-                if have < need:
+                if not have >= need:
                     return (
                         f"the three-leg stance at the end of the path sways: stiffness "
-                        f"{have:.0f} N/m on the servos (< {need:.0f} N/m)"
+                        f"{have:.0f} N/m on the servos (< {need:.0f} N/m; -inf: a singular "
+                        "support leg)"
                     )
         return ""
 

@@ -493,10 +493,16 @@ class Theta2(ThetaProblem):
         best, latest, x = sol, sol, sol.x
         for _ in range(SWAY_ROUNDS):
             st = self._stiffness(latest.state)
+            if not np.isfinite(st.least):
+                break  # a singular support leg: no rows to build here
             G = (st.hessian - st.joint_part) / need
             M = st.joint_part / need + G - target * np.eye(6)
-            shift = max(0.0, -float(np.linalg.eigvalsh(M)[0])) + 0.05
-            L = np.linalg.cholesky(M + shift * np.eye(6))
+            w = np.linalg.eigvalsh(M)
+            shift = max(0.0, -float(w[0])) + 0.05 + 1e-9 * float(np.abs(w).max())
+            try:  # the factor's start: M lifted to positive definite
+                L = np.linalg.cholesky(M + shift * np.eye(6))
+            except np.linalg.LinAlgError:
+                break  # ill-conditioned (a leg near a singularity): no rows here
             p2[sib._p_slices["sway_G"]] = G[_TRIL]
             p2[sib._p_slices["sway_target"]] = target
             x2 = np.zeros(sib._x_sym.numel())
