@@ -218,6 +218,10 @@ class LegKinematics:
         """Symbolic foot centre of one leg in body frame (CasADi 3-vector)."""
         return twist_apply_ca(self.legs[leg], theta, self.legs[leg].foot_B0)
 
+    def foot_jacobian_B_ca(self, leg: int, theta):
+        """Symbolic (3, 3) d foot_B / d theta of one leg at ``theta`` (any CasADi expression)."""
+        return self._foot_fun[leg](theta)[1]
+
     def feet_W_ca(self, base_position_W, base_rotation_W, joints12):
         """Symbolic (3 x 4) foot centres in world frame; joints12 legs in order FL..HR."""
         cols = [
@@ -542,10 +546,15 @@ def finalize_robot(robot: Robot) -> None:
     robot._kinematics = kin  # cached, see kinematics_of
 
 
+def robot_cached(robot: Robot, attr: str, build):
+    """``build(robot)``, made once per robot and kept on it as ``attr`` (derived models)."""
+    value = getattr(robot, attr, None)
+    if value is None:
+        value = build(robot)
+        setattr(robot, attr, value)
+    return value
+
+
 def kinematics_of(robot: Robot) -> LegKinematics:
     """The (cached) :class:`LegKinematics` of a robot."""
-    kin = getattr(robot, "_kinematics", None)
-    if kin is None:
-        kin = LegKinematics(robot)
-        robot._kinematics = kin
-    return kin
+    return robot_cached(robot, "_kinematics", LegKinematics)

@@ -50,8 +50,8 @@ import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
-from planner.kinematics import kinematics_of
-from planner.lie import rotation_from_vector_ca
+from planner.kinematics import kinematics_of, robot_cached
+from planner.lie import hat_ca, rotation_from_vector_ca
 from planner.servo_model import servo_model
 
 if TYPE_CHECKING:
@@ -62,7 +62,6 @@ __all__ = [
     "SWAY_STIFFNESS_MIN_MG_PER_L",
     "StanceStiffness",
     "SwayStiffness",
-    "joint_sway_form_ca",
     "joint_sway_matrix_ca",
     "sway_stiffness_of",
 ]
@@ -94,11 +93,6 @@ class StanceStiffness:
     def least(self) -> float:
         """The smallest eigenvalue [N/m]."""
         return float(self.eigenvalues[0])
-
-    @property
-    def softest(self) -> _Array:
-        """(6,) the unit direction of the smallest eigenvalue."""
-        return self.directions[:, 0].copy()
 
 
 class SwayStiffness:
@@ -140,7 +134,7 @@ class SwayStiffness:
             th = t0
             for _ in range(_NEWTON_STEPS):
                 foot = kin.foot_B_ca(i, th)
-                th = th + ca.solve(_jacobian(kin, i, th), target_B - foot)
+                th = th + ca.solve(kin.foot_jacobian_B_ca(i, th), target_B - foot)
             d = th - t0
             energy = energy + 0.5 * kp * ca.dot(d, d) - ca.dot(tau[3 * i : 3 * i + 3], d)
             joints.append(th)
@@ -187,17 +181,7 @@ class SwayStiffness:
 
 def sway_stiffness_of(robot: Robot) -> SwayStiffness:
     """The (cached) :class:`SwayStiffness` of a robot, at its servo model's stiffness."""
-    sway = getattr(robot, "_sway_stiffness", None)
-    if sway is None:
-        sway = SwayStiffness(robot)
-        robot._sway_stiffness = sway
-    return sway
-
-
-def _jacobian(kin, leg: int, theta):
-    """The Jacobian d foot_B / d theta of one leg at ``theta`` (any CasADi expression)."""
-    sym = ca.SX.sym("t", 3)
-    return ca.substitute(ca.jacobian(kin.foot_B_ca(leg, sym), sym), sym, theta)
+    return robot_cached(robot, "_sway_stiffness", SwayStiffness)
 
 
 def joint_sway_matrix_ca(kin, kp: float, length_m: float, p_W, R_W, joints12, centres, support):
@@ -210,26 +194,9 @@ def joint_sway_matrix_ca(kin, kp: float, length_m: float, p_W, R_W, joints12, ce
     """
     K = 0
     for i in support:
-        J = _jacobian(kin, i, joints12[3 * i : 3 * i + 3])
+        J = kin.foot_jacobian_B_ca(i, joints12[3 * i : 3 * i + 3])
         rel = centres[i] - p_W
-        B = -ca.mtimes(R_W.T, ca.horzcat(ca.DM.eye(3), -_hat(rel) / length_m))
+        B = -ca.mtimes(R_W.T, ca.horzcat(ca.DM.eye(3), -hat_ca(rel) / length_m))
         G = ca.solve(J, B)
         K = K + ca.mtimes(G.T, G)
     return kp * K
-
-
-def joint_sway_form_ca(
-    kin, kp: float, length_m: float, p_W, R_W, joints12, centres, support, u, v=None
-):
-    """u^T K_joint v for body motions ``u``, ``v`` (6,), ``v`` None: ``u`` (CasADi).
-
-    K_joint: :func:`joint_sway_matrix_ca`.
-    """
-    K = joint_sway_matrix_ca(kin, kp, length_m, p_W, R_W, joints12, centres, support)
-    return ca.mtimes([u.T, K, u if v is None else v])
-
-
-def _hat(w):
-    return ca.vertcat(
-        ca.horzcat(0, -w[2], w[1]), ca.horzcat(w[2], 0, -w[0]), ca.horzcat(-w[1], w[0], 0)
-    )

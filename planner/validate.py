@@ -942,6 +942,7 @@ def _joint_torques(ck: _Checker, contacts: _Array, report: CheckReport) -> None:
 
 def _sway(ck: _Checker, report: CheckReport) -> None:
     """The least sway stiffness where a three-leg stance begins (a figure, not a test)."""
+    from planner.lie import rotation_from_quat
     from planner.stiffness import sway_stiffness_of
     from planner.torques import holding_load
 
@@ -957,7 +958,7 @@ def _sway(ck: _Checker, report: CheckReport) -> None:
     least = math.inf
     for k, tk in zip(starts, tau, strict=True):
         q = sm.q[k]
-        R = pin.Quaternion(q[6], q[3], q[4], q[5]).toRotationMatrix()
+        R = rotation_from_quat(q[3:7])
         st = sway.stance(q[:3], R, ck.robot.joints_from_q(q), np.flatnonzero(down[k]), tk)
         least = min(least, st.least)
     report.min_sway_stiffness_N_per_m = least

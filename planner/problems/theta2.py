@@ -536,11 +536,6 @@ class Theta2(ThetaProblem):
         normals = self.terrain.normal(state.feet_W)
         return self._torques.solve(q, self.support, self.mu, normals, least_squares=True)
 
-    def _torque_ratio(self, state: State) -> float:
-        """The commanded distribution's largest tau / effort (Pinocchio, Clarabel), or 0."""
-        res = self._commanded(state)
-        return float(res.ratio) if np.isfinite(res.ratio) else float("inf")
-
     def _stiffness(self, state: State, torques_nm=None):
         """The sway stiffness of a three-leg pose, the commanded torques as feed-forward."""
         if torques_nm is None:
