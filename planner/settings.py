@@ -10,6 +10,7 @@ file (``stratawalk plan --config settings.yaml``) holds any of them::
     body_speed_m_s: 0.03    # body moves, peak speed [m/s]
     body_accel_m_s2: 0.5    # body moves, acceleration bound [m/s^2]
     swing_time_s: 0.8       # least duration of a swing [s]
+    swing_overlap: 1.0      # share of a body move the next swing may overlap (0: none)
     clearance_m: 0.03       # swing height: the foot's lift above the terrain [m]
     theta.clearance_m: 0.03 # body clearance: the body box above the terrain [m]
     gait: [HL, FL, HR, FR]  # the crawl's leg order
@@ -57,6 +58,11 @@ SETTINGS: tuple[Setting, ...] = (
         "acceleration bound of body moves [m/s^2] (quasi-static)", 0.0, 10.0,
     ),
     Setting("swing_time_s", "--swing-time", "float", "least duration of a swing [s]", 0.0, 60.0),
+    Setting(
+        "swing_overlap", "--swing-overlap", "float",
+        "largest share of a body move the next swing may overlap (0: body still in swings)",
+        0.0, 1.0, lo_open=False,
+    ),
     Setting("clearance_m", "--swing-height", "float", "swing height over the terrain [m]", 0, 0.5),
     Setting(
         "theta.clearance_m", "--body-clearance", "float",
@@ -184,6 +190,7 @@ def effective(planner: Any, seed: int = 1) -> dict:
         "body_speed_m_s": float(loc.body_speed_m_s),
         "body_accel_m_s2": float(loc.body_accel_m_s2),
         "swing_time_s": float(loc.swing_time_s),
+        "swing_overlap": float(loc.swing_overlap),
         "clearance_m": float(loc.clearance_m or default_clearance_m(planner.robot)),
         "theta.clearance_m": float(loc.theta.clearance_m),
         "gait": [LEG_NAMES[i] for i in (loc.gait or CRAWL)],

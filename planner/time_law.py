@@ -14,7 +14,9 @@ every sample interval the least duration under
   spare (:func:`carried_accel_m_s2`: the quasi-static check of section 6 with gravity
   g - a u, so the motion stays quasi-static in the sense that matters), and
   :data:`FOOT_ACCEL_M_S2`, which lets the servos follow a swing;
-- rest at both ends: every keyframe is a static equilibrium (section 6).
+- rest at both ends: every keyframe is a static equilibrium (section 6). A swing may
+  start before its body move has come to rest (:mod:`planner.local.overlap`); the body
+  still rests on its Theta2 pose when the foot lands.
 
 It is the discrete time-optimal parameterisation of a sampled path: the speed at each
 sample is the largest the forward pass (v_{k+1}^2 <= v_k^2 + 2 a l_k from rest) and the

@@ -111,6 +111,9 @@ class LocalSettings:
         the least duration of a swing. None: LittleDog's ``BODY_SPEED_M_S``,
         ``BODY_ACCEL_M_S2``, ``SWING_TIME_S``, scaled to the robot by dynamic similarity
         (speeds and times x sqrt(s), accelerations alike, :mod:`planner.robot_scale`).
+    swing_overlap : the largest share of a body move's duration that the next swing may
+        overlap (:mod:`planner.local.overlap`: the leg lifts once the rest of the move
+        holds on three legs); 0: the body rests during every swing (the paper's step).
     goal_tol_m : distance of the COM (xy) to the goal that counts as arrived.
     balance_margin_frac : least friction-cone margin (x m g) at every sample of a path.
     max_fails_in_row : failed step attempts in a row after which the planner is stuck.
@@ -129,6 +132,7 @@ class LocalSettings:
     body_speed_m_s: float | None = None
     body_accel_m_s2: float | None = None
     swing_time_s: float | None = None
+    swing_overlap: float = 1.0
     goal_tol_m: float = 0.05
     max_cycles: int = 400
     time_budget_s: float = 120.0
@@ -171,6 +175,9 @@ class Step:
     swing_path: list[State]
     phase: str = ""
     diagnosis: str = ""
+    # the swing overlapping the body move (planner.local.overlap), set by step_samples
+    overlap: object = field(default=None, repr=False)
+    timed: bool = field(default=False, repr=False)
 
 
 @dataclass
@@ -211,11 +218,14 @@ class Walk:
         states, t = p.step_samples(step)
         t = self.times[-1] + t
         n_body = max(len(step.body_path) - 1, 0)
+        if step.overlap is not None:  # the leg lifts at this body sample (local.overlap)
+            n_body = step.overlap.lift
         p._append(self.samples, self.times, states[: 1 + n_body], t[1 : 1 + n_body])
         self.keyframes.append(step.moved)
         if step.ok:
             p._append(self.samples, self.times, states[n_body:], t[1 + n_body :])
-            self.keyframes += [p._swing_keyframe(step.swing_path, step.leg, p.check), step.end]
+            swing = step.swing_path if step.overlap is None else states[n_body:]
+            self.keyframes += [p._swing_keyframe(swing, step.leg, p.check), step.end]
             self.steps += 1
 
     def add_body_move(self, end: State, path: list[State]) -> None:
@@ -1353,7 +1363,17 @@ class LocalPlanner:
         """A step's samples and their times [s] from 0 at its start (the executor's too, 8.3).
 
         The body path, then (a placement) the swing; their shared sample appears once.
+        With ``settings.swing_overlap`` the leg lifts before the body move ends where the
+        rest of it holds on three legs (:func:`planner.local.overlap.overlap_step`; found
+        once per step, then kept in ``step.overlap``).
         """
+        from planner.local.overlap import overlap_step
+
+        if not step.timed:
+            step.overlap = overlap_step(self, step)
+            step.timed = True
+        if step.overlap is not None:
+            return list(step.overlap.states), np.array(step.overlap.times_s)
         states = list(step.body_path)
         times = [0.0] + list(self.body_offsets_s(states))
         if step.ok:
