@@ -58,7 +58,6 @@ CLEARANCE_FRACTION_OF_REACH = 0.167  # default clearance = 0.167 * leg reach (0.
 ON_TERRAIN_TOL_M = 1e-6  # a foot point within this of height(x, y) is on the terrain
 STANCE_TOL_M = 1e-9  # stance feet of the two ends of a leaf must agree to this
 PHASES = ("liftoff", "rise", "travel", "descend", "touchdown")
-SAME_POSE_TOL = 1e-13  # base poses (m and rotation entries) this close: the base rests
 BETWEEN_SAMPLES_RAD = 0.2  # a joint moving more in one sample interval has its leg links
 BETWEEN_STEP_RAD = 0.05  # checked this often between the samples (planner and check)
 
@@ -299,11 +298,6 @@ def _check_stance(state_a: State, state_b: State, stance: list[int]) -> None:
             )
 
 
-def _same_pose(g_a: _Array, g_b: _Array) -> bool:
-    """Whether two base poses (4x4) agree to rounding (a base at rest)."""
-    return bool(np.max(np.abs(g_a - g_b)) <= SAME_POSE_TOL)
-
-
 def _leaf_stratum(state_a: State, state_b: State) -> int:
     sa, sb = int(state_a.stratum), int(state_b.stratum)
     if sa == sb or sb == 0:
@@ -363,17 +357,9 @@ def _interpolate(
     ref = state_a.joints_rad
     out: list[State] = []
     rot_prev = None
-    results: list = []  # the previous sample's IK, per leg
     for k in range(n):
         p, R = poses[k][:3, 3], poses[k][:3, :3]
-        if rolling and k > 0 and stance and _same_pose(poses[k], poses[k - 1]):
-            # the base rests (a swing): the stance legs neither turn nor roll
-            centres[k, stance], feet[k, stance] = centres[k - 1, stance], feet[k - 1, stance]
-            c_B = (centres[k] - p) @ R
-            results = [
-                results[i] if i in stance else kin.ik_leg_near(i, c_B[i], ref[i]) for i in range(4)
-            ]
-        elif rolling and k > 0 and stance:
+        if rolling and k > 0 and stance:
             if k > 1:  # first guess: the previous sample's rolling again
                 centres[k, stance] = 2.0 * centres[k - 1, stance] - centres[k - 2, stance]
             centres[k], feet[k, stance], results, rot_prev = roll_stance_feet(

@@ -309,20 +309,30 @@ class LegLinks:
             b.append(R @ cap.b_J + t)
         return np.array(a), np.array(b)
 
-    def path_margin(self, terrain, q: _Array, swing_legs=(), scale: float = 1.0) -> _Array:
+    def path_margin(
+        self, terrain, q: _Array, swing_legs=(), scale: float = 1.0, legs=None
+    ) -> _Array:
         """(C,) least of (clearance bound - path margin) over each capsule's points [m].
 
-        ``scale`` multiplies the margin (0: the clearance bound itself).
+        ``scale`` multiplies the margin (0: the clearance bound itself). ``legs``: only
+        these legs' capsules are measured (the others get +inf); None: all.
 
         Negative: some point of the capsule is nearer the terrain than the path margin
         (``PATH_MARGIN_M`` + ``PATH_ANGLE_RAD`` x its distance to the leg's anchor): by
         the conservative bound of :meth:`clearance_fast`, and where that fails, by the
         Euclidean distance to the nearest terrain point (:meth:`witnesses`' cloud, ~1 mm).
         """
-        gap = self._gaps(terrain, q)
-        legs = np.array([cap.leg for cap in self.capsules])[self.owner]
+        point_legs = np.array([cap.leg for cap in self.capsules])[self.owner]
+        if legs is None:
+            gap = self._gaps(terrain, q)
+        else:
+            pts = self._points_W = self.axis_points_W(q)
+            gap = np.full(len(pts), np.inf)
+            on = np.isin(point_legs, list(legs))
+            gap[on] = disc_clearance(terrain, pts[on], self.radius[on])
         need = scale * (
-            PATH_MARGIN_M + PATH_ANGLE_RAD * self._anchor_distance(self._points_W, legs, swing_legs)
+            PATH_MARGIN_M
+            + PATH_ANGLE_RAD * self._anchor_distance(self._points_W, point_legs, swing_legs)
         )
         out = np.full(len(self.capsules), np.inf)
         np.minimum.at(out, self.owner, gap - need)

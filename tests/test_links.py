@@ -75,6 +75,25 @@ def test_path_margin_and_witnesses_flag_a_shank_at_an_edge(littledog):
     assert clear < KEYFRAME_MARGIN_M + KEYFRAME_ANGLE_RAD * 0.2  # near, by the exact measure
 
 
+@pytest.mark.parametrize("legs", [[0], [1, 3], [0, 1, 2, 3]])
+def test_path_margin_of_some_legs_is_theirs_and_leaves_the_others(littledog, rng, legs):
+    """``legs``: those legs' capsules get the margins of the full call, near an edge too
+    (the Euclidean fallback), the others +inf."""
+    terrain = _course("step", x=0.8, height=0.1)
+    links = leg_links(littledog)
+    near = 0
+    for _ in range(10):
+        joints = littledog.theta_nor + rng.normal(scale=0.3, size=(4, 3))
+        q = littledog.q_from(np.array([0.72, 0.0, rng.uniform(0.08, 0.2)]), [0, 0, 0, 1], joints)
+        full = links.path_margin(terrain, q, swing_legs=[1])
+        some = links.path_margin(terrain, q, swing_legs=[1], legs=legs)
+        mine = np.array([cap.leg in legs for cap in links.capsules])
+        np.testing.assert_array_equal(some[mine], full[mine])
+        assert np.all(np.isinf(some[~mine]))
+        near += int(np.any(full[mine] < 0.0))
+    assert near > 0  # some capsule within its margin: the Euclidean fallback ran
+
+
 def test_the_shank_end_inside_the_foot_sphere_is_cut(rng):
     """What is cut lies inside the foot sphere; the new end's ball touches it from inside."""
     from planner.links import _outside_sphere

@@ -905,19 +905,23 @@ class LocalPlanner:
         """
         for k in range(len(path) - 1):
             a, b = path[k], path[k + 1]
-            jump = float(np.max(np.abs(b.joints_rad - a.joints_rad)))
+            leg_jump = np.max(np.abs(b.joints_rad - a.joints_rad), axis=1)  # (4,) [rad]
+            jump = float(leg_jump.max())
             if jump <= BETWEEN_SAMPLES_RAD:
                 continue
             swing = [i for i in range(4) if not (a.in_contact[i] and b.in_contact[i])]
+            # a leg moving less than one sweep step is within it of its ends (a stance leg
+            # beside a swing does not move at all): only the others are swept
+            legs = np.flatnonzero(leg_jump > BETWEEN_STEP_RAD)
             ends = np.minimum(
-                links.path_margin(self.terrain, qs[k], swing, scale=0.0),
-                links.path_margin(self.terrain, qs[k + 1], swing, scale=0.0),
+                links.path_margin(self.terrain, qs[k], swing, scale=0.0, legs=legs),
+                links.path_margin(self.terrain, qs[k + 1], swing, scale=0.0, legs=legs),
             )
             floor = np.minimum(ends, 0.0) - START_SLACK_M
             m = int(np.ceil(jump / BETWEEN_STEP_RAD))
             for u in np.arange(1, m) / m:
                 q = between_q(qs[k], qs[k + 1], u)
-                bare = links.path_margin(self.terrain, q, swing, scale=0.0)
+                bare = links.path_margin(self.terrain, q, swing, scale=0.0, legs=legs)
                 c = int(np.argmin(bare - floor))
                 if bare[c] < floor[c]:
                     return (

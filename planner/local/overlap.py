@@ -60,15 +60,13 @@ class Overlap:
 
     ``lift``: the body-path sample at which the leg lifts; ``states`` and ``times_s``: the
     step's samples and their times [s] from its start (as
-    :meth:`LocalPlanner.step_samples`); ``saved_s``: how much shorter the step is than
-    body move and swing one after the other. The step lands on its own ``end``.
+    :meth:`LocalPlanner.step_samples`). The step lands on its own ``end``.
     """
 
-    def __init__(self, lift: int, states: list, times_s: _Array, saved_s: float):
+    def __init__(self, lift: int, states: list, times_s: _Array):
         self.lift = lift
         self.states = states
         self.times_s = times_s
-        self.saved_s = saved_s
 
 
 def _one_leaf(body: list[State]) -> _Array | None:
@@ -265,9 +263,7 @@ def overlap_step(planner: LocalPlanner, step: Step) -> Overlap | None:
     nus = _one_leaf(body)
     if nus is None:
         return None
-    alone_t = np.concatenate([[0.0], planner.body_offsets_s(body)])
     swing_alone = np.concatenate([[0.0], planner.swing_offsets_s(swing, leg)])
-    plain_s = alone_t[-1] + swing_alone[-1]
     n = len(body)
     first = _earliest_lift(planner, body, leg)
     clearance = planner.settings.clearance_m or default_clearance_m(planner.robot)
@@ -290,7 +286,7 @@ def overlap_step(planner: LocalPlanner, step: Step) -> Overlap | None:
             if not why:
                 states = list(body[: lift + 1]) + list(path[1:])
                 times = np.concatenate([body_t[: lift + 1], body_t[lift] + swing_t[1:]])
-                return Overlap(lift, states, times, float(plain_s - times[-1]))
+                return Overlap(lift, states, times)
             if "balance" in why or "COM" in why:
                 break  # a lower swing does not move the COM less
     return None
