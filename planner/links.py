@@ -323,13 +323,8 @@ class LegLinks:
         Euclidean distance to the nearest terrain point (:meth:`witnesses`' cloud, ~1 mm).
         """
         point_legs = np.array([cap.leg for cap in self.capsules])[self.owner]
-        if legs is None:
-            gap = self._gaps(terrain, q)
-        else:
-            pts = self._points_W = self.axis_points_W(q)
-            gap = np.full(len(pts), np.inf)
-            on = np.isin(point_legs, list(legs))
-            gap[on] = disc_clearance(terrain, pts[on], self.radius[on])
+        on = None if legs is None else np.isin(point_legs, list(legs))
+        gap = self._gaps(terrain, q, on)
         need = scale * (
             PATH_MARGIN_M
             + PATH_ANGLE_RAD * self._anchor_distance(self._points_W, point_legs, swing_legs)
@@ -374,10 +369,17 @@ class LegLinks:
         gap = self._gaps(terrain, q)
         return gap, self._points_W
 
-    def _gaps(self, terrain, q: _Array) -> _Array:
-        """(P,) clearance bound of every axis point (see :meth:`clearance_fast`)."""
+    def _gaps(self, terrain, q: _Array, on: _Array | None = None) -> _Array:
+        """(P,) clearance bound of every axis point (see :meth:`clearance_fast`).
+
+        ``on`` (P,) bool: only those points are measured, the others get +inf.
+        """
         pts = self._points_W = self.axis_points_W(q)
-        return disc_clearance(terrain, pts, self.radius)
+        if on is None:
+            return disc_clearance(terrain, pts, self.radius)
+        gap = np.full(len(pts), np.inf)
+        gap[on] = disc_clearance(terrain, pts[on], self.radius[on])
+        return gap
 
 
 def disc_clearance(terrain, points_W: _Array, radius_m) -> _Array:

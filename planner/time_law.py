@@ -37,6 +37,7 @@ from numpy.typing import NDArray
 
 __all__ = [
     "body_profile",
+    "swing_caps",
     "swing_durations_s",
     "rest_to_rest_durations_s",
     "rest_to_rest_profile",
@@ -196,16 +197,37 @@ def swing_durations_s(
     3x brought it to 4.2 cm, slowing the lift-off third did not). A swing shorter than
     ``least_s`` is stretched to it.
     """
-    f = np.asarray(foot_W, float)
-    if len(f) < 2:
+    if len(foot_W) < 2:
         return np.zeros(0)
-    ell = np.maximum(np.linalg.norm(np.diff(f, axis=0), axis=1), 1e-9)
-    caps = np.full(len(ell), foot_speed_m_s)
-    caps[len(ell) - max(1, round(len(ell) * LANDING_FRACTION)) :] = landing_speed_m_s
-    caps = np.minimum(caps, _joint_caps(joints_rad, ell, vmax_rad_s, fraction))
+    ell, caps = swing_caps(
+        foot_W, joints_rad, foot_speed_m_s=foot_speed_m_s,
+        landing_speed_m_s=landing_speed_m_s, vmax_rad_s=vmax_rad_s, fraction=fraction,
+    )  # fmt: skip
     dt = rest_to_rest_durations_s(ell, caps, foot_accel_m_s2)
     total = float(dt.sum())
     return dt * (least_s / total) if 0.0 < total < least_s else dt
+
+
+def swing_caps(
+    foot_W: _Array,
+    joints_rad: _Array,
+    *,
+    foot_speed_m_s: float,
+    landing_speed_m_s: float,
+    vmax_rad_s: _Array | None,
+    fraction: float = JOINT_SPEED_FRACTION,
+) -> tuple[_Array, _Array]:
+    """(lengths [m], speed caps [m/s]) of a swing's intervals (:func:`swing_durations_s`).
+
+    The foot's cap, ``landing_speed_m_s`` over the landing third of the intervals, and
+    every joint within ``fraction`` of its limit; ``lengths / caps`` is each interval's
+    least duration.
+    """
+    f = np.asarray(foot_W, float)
+    ell = np.maximum(np.linalg.norm(np.diff(f, axis=0), axis=1), 1e-9)
+    caps = np.full(len(ell), foot_speed_m_s)
+    caps[len(ell) - max(1, round(len(ell) * LANDING_FRACTION)) :] = landing_speed_m_s
+    return ell, np.minimum(caps, _joint_caps(joints_rad, ell, vmax_rad_s, fraction))
 
 
 def _angle(Ra: _Array, Rb: _Array) -> float:

@@ -107,6 +107,18 @@ def _earliest_lift(planner: LocalPlanner, body: list[State], leg: int) -> int:
     return first
 
 
+def _moving(path: list[State]) -> range:
+    """Indices of ``path``'s samples before the body comes to rest on its last pose.
+
+    From there on the stance is the Theta2 pose, certified by Theta2.
+    """
+    last = path[-1].base_position_W
+    for k in range(1, len(path) - 1):
+        if np.linalg.norm(path[k].base_position_W - last) < 1e-9:
+            return range(k)
+    return range(len(path) - 1)
+
+
 def _tips(planner: LocalPlanner, path: list[State], leg: int) -> str:
     """Why a sample of ``path`` with the body moving lacks a chosen pose's tip margin, or "".
 
@@ -115,10 +127,8 @@ def _tips(planner: LocalPlanner, path: list[State], leg: int) -> str:
     body rests). This is also the margin of a step corrected from a measured state (8.4).
     """
     sup = [i for i in range(4) if i != leg]
-    last = path[-1].base_position_W
-    for k, s in enumerate(path[:-1]):
-        if k > 0 and np.linalg.norm(s.base_position_W - last) < 1e-9:
-            break
+    for k in _moving(path):
+        s = path[k]
         tip = support_margin_m(s.feet_W[sup], planner.check.com_W(s))
         if tip < BALANCE_MARGIN_M:
             return f"the COM is {tip * 1000:.1f} mm inside the triangle at sample {k}"
@@ -231,10 +241,8 @@ def _swings_with_body(planner: LocalPlanner, path: list[State], leg: int) -> str
     sway = sway_stiffness_of(planner.robot)
     need = sway.bound_n_per_m(bound)
     sup = np.array([i for i in range(4) if i != leg])
-    last = path[-1].base_position_W
-    for k, s in enumerate(path[:-1]):
-        if k > 0 and np.linalg.norm(s.base_position_W - last) < 1e-9:
-            break  # the body has come to rest on the Theta2 pose (certified by Theta2)
+    for k in _moving(path):
+        s = path[k]
         q = planner.robot.q_from(s.base_position_W, s.base_quaternion_xyzw, s.joints_rad)
         tq = planner.torques.solve(
             q, sup, planner.mu, planner.terrain.normal(s.feet_W), least_squares=True
@@ -254,7 +262,7 @@ def overlap_step(planner: LocalPlanner, step: Step) -> Overlap | None:
     swing runs in joint space, or its body move is not a single leaf): the step is then
     executed as body move, then swing.
     """
-    share = float(getattr(planner.settings, "swing_overlap", 0.0))
+    share = float(planner.settings.swing_overlap)
     body, swing, leg = step.body_path, step.swing_path, step.leg
     if not step.ok or share <= 0.0 or len(body) < 3 or len(swing) < 2:
         return None
@@ -315,21 +323,14 @@ def _timed_merge(planner, step, lift, body_t, nus, swing_alone, clr):
 def _least_intervals_s(planner, path: list[State], leg: int) -> _Array:
     """Least durations [s] of a path's intervals under the joint and swing-foot speed caps."""
     from planner.robot_scale import time_scale
-    from planner.time_law import (
-        FOOT_SPEED_M_S,
-        JOINT_SPEED_FRACTION,
-        LANDING_FRACTION,
-        LANDING_SPEED_M_S,
-    )
+    from planner.time_law import FOOT_SPEED_M_S, LANDING_SPEED_M_S, swing_caps
 
-    q = np.array([s.joints_rad.ravel() for s in path])
-    need = np.zeros(len(path) - 1)
-    vmax = planner._joint_speed_limits()
-    if vmax is not None:
-        ok = np.isfinite(vmax) & (vmax > 0.0)
-        need = np.max(np.abs(np.diff(q, axis=0))[:, ok] / (JOINT_SPEED_FRACTION * vmax[ok]), 1)
     k = time_scale(planner.robot)
-    foot = np.linalg.norm(np.diff(np.array([s.feet_W[leg] for s in path]), axis=0), axis=1)
-    cap = np.full(len(foot), FOOT_SPEED_M_S * k)
-    cap[len(cap) - max(1, round(len(cap) * LANDING_FRACTION)) :] = LANDING_SPEED_M_S * k
-    return np.maximum(need, foot / cap)
+    ell, caps = swing_caps(
+        np.array([s.feet_W[leg] for s in path]),
+        np.array([s.joints_rad.ravel() for s in path]),
+        foot_speed_m_s=FOOT_SPEED_M_S * k,
+        landing_speed_m_s=LANDING_SPEED_M_S * k,
+        vmax_rad_s=planner._joint_speed_limits(),
+    )
+    return ell / caps
