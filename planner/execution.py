@@ -189,6 +189,8 @@ def _source(sim: Simulator, source: StateSource | None, **noise) -> StateSource:
 # (stride fraction, Lambda_c shrink) tried in turn for one step from a measured state
 BACKOFF = ((1.0, None), (0.5, 0.5), (0.25, 0.7))
 GUIDE_FAILS = 2  # failed cycles in a row after which feedback stops following the plan's steps
+REPLANS = 2  # ... and re-plans the rest of the walk from the measured state, at most so often
+REPLAN_BUDGET_S = 120.0  # planning time of one such re-plan [s] (the robot stands on four feet)
 MAX_ARRIVALS = 2  # arrival moves (four feet, COM over the goal) tried from measured states
 
 
@@ -208,6 +210,55 @@ def planned_steps(plan: Plan) -> list[tuple[int, _Array]]:
         if nxt is not None:
             out.append((leg, np.asarray(nxt.feet[leg], float).copy()))
     return out
+
+
+def planned_body_poses(plan: Plan) -> list:
+    """The body pose each of the plan's steps swings from, aligned with :func:`planned_steps`.
+
+    The swing keyframe's :class:`~planner.state.State` (its base is where the step's body
+    move ended), the swinging foot put back where it lifts from (the keyframe has it in
+    the air): the feedback re-planner's hint for Theta2 (8.3 with 8.4's plan).
+    """
+    states = plan.keyframe_states()
+    out = []
+    for k, kf in enumerate(plan.keyframes[:-1]):
+        leg = int(kf.stratum) - 1
+        if leg >= 0 and any(leg + 1 in f.support for f in plan.keyframes[k + 1 :]):
+            pose = states[k]
+            before = next((f for f in plan.keyframes[k::-1] if leg + 1 in f.support), None)
+            if before is not None:
+                pose.feet_W = np.array(pose.feet_W, float)
+                pose.feet_W[leg] = np.asarray(before.feet[leg], float)
+            out.append(pose)
+    return out
+
+
+def replan_rest(robot, terrain, mu, settings, state, goal_xy, tau):
+    """A new plan of the rest of the walk from a measured ``state`` (8.3), or None.
+
+    When the precomputed plan's steps no longer fit the measured state (barrier75mm: the
+    robot 1 cm off the plan's pose beside the barrier, a knee near its limit), the soft
+    planner (8.2, with its look-ahead and retrace) plans from there to the goal within
+    ``REPLAN_BUDGET_S``; its steps become the guide. None when it makes no step.
+    """
+    from dataclasses import replace
+
+    from planner.local.soft import SoftPlanner
+
+    local = SoftPlanner(
+        robot, terrain, mu=mu, settings=replace(settings, time_budget_s=REPLAN_BUDGET_S)
+    )
+    res = local.plan(state.base_position_W[:2], goal_xy, tau=tau, start_state=state)
+    if res.stats["steps"] == 0:
+        return None
+    lift = [np.array([x, y, float(terrain.height(np.array(x), np.array(y)))])
+            for x, y in (state.base_position_W[:2], np.asarray(goal_xy, float)[:2])]  # fmt: skip
+    outcome = {"reached_goal": bool(res.reached_goal), "message": res.message,
+               "distance_to_goal": float(res.distance_to_goal_m)}  # fmt: skip
+    return Plan.build(
+        robot, terrain, mu, lift[0], lift[1], res.keyframes, res.samples, res.times,
+        outcome, res.stats,
+    )  # fmt: skip
 
 
 def plan_step_cycles(plan: Plan) -> list[tuple[int, int]] | None:
@@ -269,9 +320,12 @@ def run_feedback(
     in 8.4 (:func:`correct_cycle`; gen:14's trailing hind leg at a 7 cm step up, a hind leg
     stretched on relief), unless the corrected step fails a gate of
     :func:`_follow_corrected` (reach, balance, leg links) or ``correct_plan_steps`` is
-    False. After
-    ``GUIDE_FAILS`` failed cycles in a row, or past the plan's last step, the gait queue
-    and Lambda_t take over. Measurements come from
+    False. Theta2 of a plan step is also tried from the plan's own body pose
+    (:func:`planned_body_poses`), and aimed at it when its optimum has no clear way there.
+    After ``GUIDE_FAILS`` failed cycles in a row the rest of the walk is planned anew from
+    the measured state (:func:`replan_rest`, at most ``REPLANS`` times) and its steps are
+    followed; after that, or past the plan's last step, the gait queue and Lambda_t take
+    over. Measurements come from
     ``source`` (default:
     :class:`SimulatedMocap` of the simulator with ``noise``: position_noise_m,
     angle_noise_rad, joint_noise_rad, latency_s, seed). Stops at the goal, after
@@ -281,6 +335,7 @@ def run_feedback(
     1 cm closer to the goal in
     ``no_progress_cycles`` cycles, or on a fall.
     """
+    from planner.local.base import ARRIVAL_M
     from planner.local.gait_queue import GaitQueue
     from planner.local.soft import SoftPlanner
     from planner.trajectory import Trajectory
@@ -298,10 +353,12 @@ def run_feedback(
     max_cycles = max_cycles if max_cycles is not None else 2 * n_plan + 20
     queue = GaitQueue(st.gait)
     guide, g, followed, corrected = planned_steps(plan), 0, 0, 0
+    guide_poses = planned_body_poses(plan)
     guide_cycles = plan_step_cycles(plan) if correct_plan_steps else None
     s_plan, centres = plan.samples, plan.foot_centres_W()
     step_scale = {i: 1.0 for i in range(4)}
     fails, cycles, steps, best, best_at, arrivals = 0, 0, 0, math.inf, 0, 0
+    replans = []  # the re-plans made (8.3): their steps, reaching or not
     m = ex.monitor.metrics
     try:
         while True:
@@ -313,6 +370,20 @@ def run_feedback(
             if ex.stopped:
                 message = f"fell at {m.fall_time_s:.1f} s ({m.fall_reason})"
                 break
+            if arrivals < MAX_ARRIVALS and dist > ARRIVAL_M and cycles < max_cycles:
+                # the goal inside the measured four-foot support: the planner's arrival
+                # move from here (:meth:`LocalPlanner.arrival`), instead of stepping or
+                # stopping at the tolerance's edge
+                moved = local.arrival(state, goal, tau, dist <= st.goal_tol_m)
+                if moved is not None:
+                    arrivals += 1
+                    cycles += 1
+                    end, path = moved
+                    times = np.concatenate([[0.0], local.body_offsets_s(path)])
+                    if not _execute(ex, robot, sim, path, times):
+                        message = f"fell at {m.fall_time_s:.1f} s ({m.fall_reason})"
+                        break
+                    continue
             if dist <= st.goal_tol_m:
                 message = f"reached the goal: measured COM {100 * dist:.1f} cm from it"
                 break
@@ -326,19 +397,6 @@ def run_feedback(
                 message = f"no progress in {no_progress_cycles} cycles "
                 message += f"(COM {100 * dist:.0f} cm from goal)"
                 break
-            if arrivals < MAX_ARRIVALS:
-                # the goal inside the measured four-foot support: the planner's arrival
-                # move from here (:meth:`LocalPlanner.arrival`), instead of stepping
-                moved = local.arrival(state, goal, tau)
-                if moved is not None:
-                    arrivals += 1
-                    cycles += 1
-                    end, path = moved
-                    times = np.concatenate([[0.0], local.body_offsets_s(path)])
-                    if not _execute(ex, robot, sim, path, times):
-                        message = f"fell at {m.fall_time_s:.1f} s ({m.fall_reason})"
-                        break
-                    continue
             # one cycle of the soft planner (SoftPlanner._run), from the measured state
             cycles += 1
             guided = g < len(guide)
@@ -346,7 +404,10 @@ def run_feedback(
             step, on_plan = None, False
             if guided:  # the plan's foothold first, from a body ever nearer the incentre
                 for _, shrink in BACKOFF:
-                    step = local.step(state, leg, tau, local.stride_m(), shrink, guide[g][1], False)
+                    step = local.step(
+                        state, leg, tau, local.stride_m(), shrink, guide[g][1], False,
+                        body_hint=guide_poses[g],
+                    )  # fmt: skip
                     if step.ok:
                         on_plan = True
                         break
@@ -389,7 +450,16 @@ def run_feedback(
                 if step.phase == "foot_placement":
                     step_scale[leg] = max(step_scale[leg] * 0.5, st.min_step_fraction)
                 fails += 1
-                if guided and fails >= GUIDE_FAILS:  # the plan's steps no longer fit
+                new = None
+                if guided and fails >= GUIDE_FAILS and len(replans) < REPLANS:
+                    # the plan's steps no longer fit: the rest of the walk planned anew
+                    new = replan_rest(robot, terrain, plan.friction, st, state, goal, tau)
+                    replans.append(0 if new is None else len(planned_steps(new)))
+                if new is not None:
+                    guide, guide_poses = planned_steps(new), planned_body_poses(new)
+                    guide_cycles = plan_step_cycles(new) if correct_plan_steps else None
+                    s_plan, centres, g, fails = new.samples, new.foot_centres_W(), 0, 0
+                elif guided and fails >= GUIDE_FAILS:  # the plan's steps no longer fit
                     g = len(guide)
                     queue = _queue_after(st.gait, leg)  # the leg that failed goes last
                 elif not guided:
@@ -414,6 +484,7 @@ def run_feedback(
             "plan_steps": len(guide),
             "plan_steps_followed": followed,  # landed on the plan's foothold
             "plan_steps_corrected": corrected,  # the plan's own step, corrected (8.4)
+            "replans": replans,  # steps of each re-plan of the rest of the walk
             "arrivals": arrivals,  # arrival moves executed (four feet, COM over the goal)
             "planner_solves": local.stats,
             "planner_failures": local.failures[-50:],
@@ -525,7 +596,12 @@ def correct_cycle(
                 target = plan_centres[k, i] + (1.0 - u) * (c_meas[i] - plan_centres[0, i])
             else:
                 target = plan_centres[k, i]
-            res = kin.ik_leg(i, R.T @ (target - p), reference_rad=ref[i])
+            # the plan sample's own knee branch: a leg the plan landed on its other knee
+            # beside an edge (LocalPlanner._other_knee_landing) keeps it; the leg's
+            # default branch put barrier75mm's FR shank 33 mm into the barrier
+            res = kin.ik_leg(
+                i, R.T @ (target - p), reference_rad=ref[i], knee=kin.knee_direction(i, ref[i])
+            )
             misses += int(not res.reachable)
             joints[i] = res.joints_rad
         out[k] = robot.q_from(p, quat_from_rotation(R) if w > 0.0 else plan_q[k, 3:7], joints)

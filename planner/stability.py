@@ -24,6 +24,7 @@ from numpy.typing import ArrayLike, NDArray
 __all__ = [
     "BALANCE_MARGIN_M",
     "PATH_BALANCE_MARGIN_M",
+    "nearest_inside_point_W",
     "polygon_margin_m",
     "support_margin_m",
     "support_margins_ca",
@@ -69,6 +70,48 @@ def polygon_margin_m(feet_W: ArrayLike, com_W: ArrayLike) -> float:
         e = b - a
         out = min(out, _cross(e, p - a) / float(np.linalg.norm(e)))
     return float(out)
+
+
+def nearest_inside_point_W(feet_W: ArrayLike, p_W: ArrayLike, margin_m: float):
+    """The horizontal point nearest ``p_W`` that lies ``margin_m`` inside the feet's hull.
+
+    The hull of the feet (any number, projected along gravity) is shrunk by ``margin_m``
+    (each edge's half-plane moved inwards, the polygon clipped by them); returns the
+    (2,) point of that inset polygon nearest to ``p_W`` (``p_W`` itself when inside), or
+    None when the inset polygon is empty.
+    """
+    pts = np.asarray(feet_W, dtype=float).reshape(-1, 3)[:, :2]
+    p = np.asarray(p_W, dtype=float).reshape(-1)[:2]
+    hull = _convex_hull(pts)
+    if len(hull) < 3:
+        return None
+    poly = [np.asarray(v, float) for v in hull]
+    for a, b in zip(hull, np.roll(hull, -1, axis=0), strict=True):
+        e = b - a
+        n_in = np.array([-e[1], e[0]]) / float(np.linalg.norm(e))  # counter-clockwise hull
+        side = [float(n_in @ (v - a)) - margin_m for v in poly]
+        clipped = []
+        for k, v in enumerate(poly):  # Sutherland-Hodgman against one half-plane
+            w, sv, sw = poly[(k + 1) % len(poly)], side[k], side[(k + 1) % len(poly)]
+            if sv >= 0.0:
+                clipped.append(v)
+            if sv * sw < 0.0:
+                clipped.append(v + (w - v) * sv / (sv - sw))
+        poly = clipped
+        if len(poly) < 3:
+            return None
+    inset = np.array(poly)
+    if polygon_margin_m(np.c_[inset, np.zeros(len(inset))], p) >= 0.0:
+        return p.copy()
+    best, best_d = None, np.inf
+    for a, b in zip(inset, np.roll(inset, -1, axis=0), strict=True):
+        e = b - a
+        t = float(np.clip((p - a) @ e / max(float(e @ e), 1e-18), 0.0, 1.0))
+        q = a + t * e
+        d = float(np.linalg.norm(p - q))
+        if d < best_d:
+            best, best_d = q, d
+    return best
 
 
 def _convex_hull(pts: NDArray) -> NDArray:

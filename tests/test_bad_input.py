@@ -192,7 +192,7 @@ def test_check_prints_at_most_50_violations(short_flat_walk, tmp_path, capsys):
     lines = capsys.readouterr().out.strip().splitlines()
     assert len(lines) == 52 and "more violations" in lines[-2] and "FAILED" in lines[-1]
     total = int(re.search(r"FAILED, (\d+) violations", lines[-1]).group(1))
-    assert total > 100
+    assert total > 50  # more than printed
     assert main(["check", str(sunk), "--all"]) == 1
     assert len(capsys.readouterr().out.strip().splitlines()) == total + 1
 

@@ -271,9 +271,9 @@ def test_a_foothold_that_leaves_the_next_leg_no_stance_is_tried_last(flat_planne
     tried = []
     real = planner.body_move
 
-    def body_move(state, leg, tau, swing_target_W=None, shrink=None):
+    def body_move(state, leg, tau, swing_target_W=None, shrink=None, hint=None):
         tried.append(None if swing_target_W is None else np.array(swing_target_W))
-        return real(state, leg, tau, swing_target_W, shrink)
+        return real(state, leg, tau, swing_target_W, shrink, hint)
 
     monkeypatch.setattr(planner, "body_move", body_move)
     step = planner.step(start, 0, tau, planner.stride_m())

@@ -234,14 +234,14 @@ def test_feedback_backs_off_instead_of_giving_up(short_plan, monkeypatch):
     real = LocalPlanner.step
     tried = []
 
-    def step(self, state, leg, tau, step_m, shrink=None, target_W=None, try_others=True):
+    def step(self, state, leg, tau, step_m, shrink=None, target_W=None, try_others=True, **kw):
         tried.append(step_m)
         if step_m > 0.6 * self.stride_m():  # the plan's footholds too (a full stride)
-            out = real(self, state, leg, tau, step_m, shrink, target_W, try_others)
+            out = real(self, state, leg, tau, step_m, shrink, target_W, try_others, **kw)
             out.ok, out.moved, out.end, out.phase = False, None, None, "body_move"
             out.diagnosis = "refused by the test"
             return out
-        return real(self, state, leg, tau, step_m, shrink, target_W, try_others)
+        return real(self, state, leg, tau, step_m, shrink, target_W, try_others, **kw)
 
     monkeypatch.setattr(LocalPlanner, "step", step)
     res = run_feedback(short_plan, max_cycles=4, correct_plan_steps=False)
@@ -285,8 +285,8 @@ def test_feedback_falls_back_on_the_plans_step_corrected(short_plan, monkeypatch
 
     real = LocalPlanner.step
 
-    def step(self, state, leg, tau, step_m, shrink=None, target_W=None, try_others=True):
-        out = real(self, state, leg, tau, step_m, shrink, target_W, try_others)
+    def step(self, state, leg, tau, step_m, shrink=None, target_W=None, try_others=True, **kw):
+        out = real(self, state, leg, tau, step_m, shrink, target_W, try_others, **kw)
         if target_W is not None:  # the plan's foothold: refused
             out.ok, out.moved, out.end, out.phase = False, None, None, "body_move"
             out.diagnosis = "refused by the test"
@@ -351,6 +351,97 @@ def test_a_corrected_plan_step_that_fails_a_gate_is_not_executed(short_plan, mon
         ex, SimulatedMocap(sim).measure(), robot, terrain, short_plan.samples,
         short_plan.foot_centres_W(), a, b, sim,
     ) is True and sim.time > t0  # fmt: skip
+
+
+def test_a_correction_keeps_a_leg_on_the_plans_other_knee(short_plan):
+    """8.4 of a plan where a leg stands on its other knee branch (as the planner lands a
+    leg beside an edge): measured exactly at the plan's first sample, the correction
+    reproduces the plan's joints; with the leg's default branch it had flipped the knee
+    (barrier75mm: the FR shank 33 mm into the barrier)."""
+    from planner.execution import correct_cycle
+    from planner.kinematics import kinematics_of
+    from planner.lie import rotation_from_quat
+
+    robot, s = short_plan.load_robot(), short_plan.samples
+    kin = kinematics_of(robot)
+    a, b = plan_step_cycles(short_plan)[1]
+    q_plan, contact = s.q[a : b + 1].copy(), s.contact[a : b + 1]
+    centres = short_plan.foot_centres_W()[a : b + 1]
+    flipped = []
+    for leg in range(4):  # a leg whose other branch stays within its limits all along
+        other = -robot.legs[leg].knee_direction
+        q_leg = q_plan.copy()
+        for k, qk in enumerate(q_plan):  # the leg on its other branch, the same foot centres
+            R, joints = rotation_from_quat(qk[3:7]), robot.joints_from_q(qk)
+            res = kin.ik_leg(leg, R.T @ (centres[k, leg] - qk[:3]), joints[leg], knee=other)
+            if not res.reachable or res.knee_flipped:
+                break
+            joints[leg] = res.joints_rad
+            q_leg[k] = robot.q_from(qk[:3], qk[3:7], joints)
+        else:
+            flipped.append(leg)
+            q_plan = q_leg
+            break
+    assert flipped, "no leg can stand on its other knee here"
+    meas = Measurement(0.0, q_plan[0].copy(), np.ones(4, bool))
+    q, misses = correct_cycle(robot, q_plan, contact, centres, meas, s.time[a : b + 1])
+    assert misses == 0
+    np.testing.assert_allclose(q[:, 7:], q_plan[:, 7:], atol=1e-6)
+
+
+def test_feedback_replans_the_rest_when_the_plans_steps_fail(short_plan, monkeypatch):
+    """Every step fails from the measured state until the rest of the walk is planned anew
+    from it (8.3): the walk then follows the new plan's steps onto its footholds."""
+    import planner.execution as execution
+    from planner.local.base import LocalPlanner
+
+    real_step, real_replan = LocalPlanner.step, execution.replan_rest
+    made = []
+
+    def step(self, *args, **kw):
+        out = real_step(self, *args, **kw)
+        if not made:  # refused until the re-plan
+            out.ok, out.moved, out.end, out.phase = False, None, None, "body_move"
+            out.diagnosis = "refused by the test"
+        return out
+
+    def replan(*args):
+        made.append(1)
+        new = real_replan(*args)
+        made.append(new)
+        return new
+
+    monkeypatch.setattr(LocalPlanner, "step", step)
+    monkeypatch.setattr(execution, "replan_rest", replan)
+    res = run_feedback(short_plan, max_cycles=8, correct_plan_steps=False)
+    m, fb = res.metrics, res.executed.stats["feedback"]
+    new = made[1]
+    assert new is not None and fb["replans"] == [len(planned_steps(new))] and fb["replans"][0] > 4
+    assert fb["steps"] == 6 and fb["plan_steps_followed"] == 6, m.summary()
+    assert not (m.fell or m.tipped), m.summary()
+    kfs = res.executed.keyframes  # measured at the start of each cycle
+    for k, (leg, foot) in enumerate(planned_steps(new)[:5]):  # onto the new plan's footholds
+        landed = kfs[k + 1].feet[leg]
+        assert np.linalg.norm(landed[:2] - foot[:2]) < 0.015, (k, landed, foot)
+
+
+def test_planned_body_poses_are_the_plans_at_each_step(short_plan):
+    """Each step's body pose is one the plan passes in that step (the swing keyframe's),
+    with every foot on the ground where that step starts (the Theta2 hint of feedback)."""
+    from planner.execution import planned_body_poses
+
+    steps, poses = planned_steps(short_plan), planned_body_poses(short_plan)
+    cycles, s = plan_step_cycles(short_plan), short_plan.samples
+    centres = short_plan.foot_centres_W()
+    rho = short_plan.load_robot().foot_radius_m
+    assert len(poses) == len(steps)
+    for (leg, _), pose, (a, b) in zip(steps, poses, cycles, strict=True):
+        assert pose.stratum == leg + 1  # a sample of the step has the pose's base
+        d = np.linalg.norm(s.q[a : b + 1, :3] - pose.base_position_W, axis=1)
+        assert d.min() < 1e-9
+        # the feet: contact points under the step's first sample's sphere centres
+        np.testing.assert_allclose(pose.feet_W[:, :2], centres[a, :, :2], atol=0.01)
+        np.testing.assert_allclose(pose.feet_W[:, 2], centres[a, :, 2] - rho, atol=0.005)
 
 
 def test_a_correction_turns_the_body_from_its_measured_attitude(short_plan):

@@ -140,3 +140,31 @@ def test_polygon_margin_is_the_triangle_margin_and_the_hull_margin(rng):
     assert polygon_margin_m(feet, [0.0, 0.0]) == pytest.approx(0.1)
     assert polygon_margin_m(feet, [0.15, 0.02]) == pytest.approx(0.05)
     assert polygon_margin_m(feet, [0.3, 0.0]) == pytest.approx(-0.1)
+
+
+def test_nearest_inside_point_against_a_dense_grid(rng):
+    """The point nearest a target among those ``margin`` inside the feet's hull: compared
+    with the best of a dense grid filtered by :func:`polygon_margin_m` (an independent
+    reference), inside (the target itself), outside, and for an empty inset."""
+    from planner.stability import nearest_inside_point_W, polygon_margin_m
+
+    gx, gy = np.meshgrid(np.linspace(-0.3, 0.3, 121), np.linspace(-0.3, 0.3, 121))
+    grid = np.c_[gx.ravel(), gy.ravel()]
+    for _ in range(12):
+        feet = np.c_[rng.uniform(-0.2, 0.2, size=(4, 2)), rng.uniform(-0.05, 0.05, 4)]
+        margin = rng.uniform(0.0, 0.03)
+        target = rng.uniform(-0.3, 0.3, size=2)
+        got = nearest_inside_point_W(feet, target, margin)
+        inside = grid[[polygon_margin_m(feet, g) >= margin for g in grid]]
+        if len(inside) == 0:
+            assert got is None or polygon_margin_m(feet, got) >= margin - 1e-9
+            continue
+        assert got is not None
+        assert polygon_margin_m(feet, got) >= margin - 1e-9  # inside the inset polygon
+        best = np.min(np.linalg.norm(inside - target, axis=1))
+        # feasible, and no feasible grid point nearer: optimal to the grid's resolution
+        assert np.linalg.norm(got - target) <= best + 1e-9
+    square = np.array([[0, 0, 0], [0.2, 0, 0], [0.2, 0.2, 0], [0, 0.2, 0.0]])
+    assert np.allclose(nearest_inside_point_W(square, [0.1, 0.05], 0.025), [0.1, 0.05])
+    assert np.allclose(nearest_inside_point_W(square, [0.3, 0.1], 0.025), [0.175, 0.1])
+    assert nearest_inside_point_W(square, [0.1, 0.1], 0.11) is None

@@ -56,6 +56,7 @@ from planner.rolling import end_keyframe
 from planner.stability import (
     BALANCE_MARGIN_M,
     PATH_BALANCE_MARGIN_M,
+    nearest_inside_point_W,
     polygon_margin_m,
     support_margin_m,
     triangle_inradius_m,
@@ -95,6 +96,7 @@ TORQUE_FRACTION = COMMANDED_TORQUE_FRACTION
 # fraction of a millimetre; a path from it may not lose more than this
 START_SLACK_M = 1e-4
 PROGRESS_M = 0.01  # the COM coming this much nearer the goal counts as progress
+ARRIVAL_M = 0.01  # a walk ending within goal_tol_m but farther than this tries the arrival
 MAX_START_TORQUE_FRACTION = 0.9  # ... but never past this (nor below zero clearance):
 # without the bounds, each path could lose a little more than the last (a ratchet)
 
@@ -491,17 +493,19 @@ class LocalPlanner:
         tau: Trajectory,
         swing_target_W=None,
         shrink: float | None = None,
+        hint: State | None = None,
     ):
         """Theta2 onto the three legs other than ``leg``; returns (solution, samples).
 
         With ``swing_target_W`` the body also keeps ``leg``'s hip within reach of its next
-        foothold (Theta2's swing-ready constraint).
+        foothold (Theta2's swing-ready constraint). ``hint``: Theta2's last starting pose
+        (:meth:`planner.problems.theta2.Theta2.solve`).
         """
         support = tuple(i for i in range(4) if i != leg)
         rc = self.body_target(state, leg, shrink, swing_target_W, tau)
         u_f, u_n = self.body_directions(tau, state, rc, leg, swing_target_W)
         landing = swing_target_W is not None
-        sol = self.theta2(support, landing).solve(state, rc, u_f, u_n, swing_target_W)
+        sol = self.theta2(support, landing).solve(state, rc, u_f, u_n, swing_target_W, hint)
         self._count("theta2", sol.feasible)
         if not sol.feasible:
             return sol, []
@@ -527,12 +531,25 @@ class LocalPlanner:
                 why2 = self.path_problem(path2)
                 if not why2 or ("path margin" in why2) == ("path margin" in why):
                     sol, path, why = again, path2, why2
-        if "path margin" in why:  # a leg link sweeps past an edge between two clear poses
-            via_path = self._via_path(state, sol.state, path, u_f, u_n)
-            if via_path is not None:
-                why2 = self.path_problem(via_path)
-                if not why2:
-                    path, why = via_path, ""
+        path, why = self._via_if_swept(state, sol.state, path, why, u_f, u_n)
+        if why and hint is not None:
+            # the hint's own body pose as the target (feedback, 8.3: the precomputed plan
+            # went there): from a measured barrier75mm state 1 cm off the plan's, Theta2's
+            # optimum lay 4 cm farther, where the way passes a knee beyond its limit
+            alt = self.theta2(support, landing).solve(
+                state, self.check.com_W(hint), u_f, u_n, swing_target_W, hint
+            )
+            self._count("theta2", alt.feasible)
+            if alt.feasible:
+                alt.state.support = support
+                alt_path = interpolate_leaf(
+                    self.robot, self.terrain, state, alt.state, self.settings.body_samples
+                )
+                alt_path, alt_why = self._via_if_swept(
+                    state, alt.state, alt_path, self.path_problem(alt_path), u_f, u_n
+                )
+                if not alt_why:
+                    sol, path, why = alt, alt_path, ""
         if why:
             sol.feasible = False
             sol.diagnosis = f"body move onto three legs: {why}"
@@ -542,6 +559,18 @@ class LocalPlanner:
         if land is not None:
             sol.state.info["landing"] = land
         return sol, path
+
+    def _via_if_swept(self, start: State, end: State, path: list[State], why: str, u_f, u_n):
+        """(path, why), through a via pose (:meth:`_via_path`) if a link sweeps an edge.
+
+        Used when ``why`` is a leg link inside its path margin and the via path passes;
+        else ``path`` and ``why`` as given.
+        """
+        if "path margin" in why:  # a leg link sweeps past an edge between two clear poses
+            via_path = self._via_path(start, end, path, u_f, u_n)
+            if via_path is not None and not self.path_problem(via_path):
+                return via_path, ""
+        return path, why
 
     def _via_path(self, start: State, end: State, path: list[State], u_f, u_n):
         """A body move through a via pose where ``path`` brings a leg link nearest the terrain.
@@ -962,6 +991,7 @@ class LocalPlanner:
         shrink: float | None = None,
         target_W=None,
         try_others: bool = True,
+        body_hint: State | None = None,
     ) -> Step:
         """One step of ``leg`` from ``state``: body move (swing-ready), swing, placement.
 
@@ -979,22 +1009,32 @@ class LocalPlanner:
         ``settings.shrink`` of Lambda_c.
         ``target_W``: the foothold to try first (a terrain point, world frame; e.g. a
         precomputed plan's), instead of Lambda_t's; ``try_others`` False: no other
-        foothold is tried.
+        foothold is tried. ``body_hint``: a body pose near the one expected for the first
+        foothold (the precomputed plan's, feedback 8.3), Theta2's last starting point.
         """
-        first = self._step_once(state, leg, tau, step_m, shrink, target_W, try_others)
+        args = (state, leg, tau, step_m, shrink, target_W, try_others, body_hint)
+        first = self._step_once(*args)
         if first.ok or not self.settings.follow_support or self._sink:
             return first
         # back off (issue 13 item 5): the same step with the body lowered wherever a leg
         # would be stretched (:meth:`_reach_sink_m`); kept only when it succeeds
         self._sink = True
         try:
-            low = self._step_once(state, leg, tau, step_m, shrink, target_W, try_others)
+            low = self._step_once(*args)
         finally:
             self._sink = False
         return low if low.ok else first
 
     def _step_once(
-        self, state: State, leg: int, tau: Trajectory, step_m: float, shrink, target_W, try_others
+        self,
+        state: State,
+        leg: int,
+        tau: Trajectory,
+        step_m: float,
+        shrink,
+        target_W,
+        try_others,
+        body_hint: State | None = None,
     ) -> Step:
         """One attempt of :meth:`step` at the body height in force."""
         if target_W is not None:
@@ -1017,10 +1057,11 @@ class LocalPlanner:
         k = 0
         while k < len(order):
             target = order[k]
-            sol2, body_path = self.body_move(state, leg, tau, target, shrink)
+            hint = body_hint if k == 0 else None
+            sol2, body_path = self.body_move(state, leg, tau, target, shrink, hint)
             if k == 0 and not sol2.feasible:
                 # the paper's plain Theta2 (no swing-ready pose) for the first foothold
-                sol2, body_path = self.body_move(state, leg, tau, None, shrink)
+                sol2, body_path = self.body_move(state, leg, tau, None, shrink, hint)
             if not sol2.feasible:
                 step = Step(leg, False, state, None, None, [], [], "body_move", sol2.diagnosis)
             else:
@@ -1146,7 +1187,7 @@ class LocalPlanner:
         """Horizontal distance of the whole-body COM to the goal [m]."""
         return float(np.linalg.norm(self.check.com_W(state)[:2] - run.goal))
 
-    def arrival(self, state: State, goal_xy, tau: Trajectory):
+    def arrival(self, state: State, goal_xy, tau: Trajectory, nearest: bool = False):
         """A body move on all four feet bringing the COM over the goal: (end, path) or None.
 
         Beyond the paper, whose walk ends after a step: a crawl's keyframes put the COM
@@ -1155,11 +1196,21 @@ class LocalPlanner:
         near it. Tried when the goal lies ``BALANCE_MARGIN_M`` inside the four feet's
         support polygon: Theta2 on S0 with all four legs, its target the goal at the
         height of the footholds' plane (:func:`support_body_target_W`), the path checked
-        as every body move's. The robot ends standing on four feet over the goal.
+        as every body move's. The robot ends standing on four feet over the goal. With
+        ``nearest`` (the walk ends here: the COM is within ``goal_tol_m``), a goal nearer
+        an edge than that is approached as far as the margin allows: the COM goes over the
+        point of the inset polygon nearest to it (:func:`nearest_inside_point_W`;
+        stepdown8cm's last keyframe had the goal 7 mm inside the polygon, the COM 4.8 cm
+        from it), unless that point is within ``ARRIVAL_M / 2`` of the COM already or
+        the goal is outside the feet.
         """
         feet = np.asarray(state.feet_W, float).reshape(4, 3)
-        goal = np.asarray(goal_xy, float).reshape(-1)[:2]
-        if polygon_margin_m(feet, goal) < BALANCE_MARGIN_M:
+        if polygon_margin_m(feet, goal_xy) < (0.0 if nearest else BALANCE_MARGIN_M):
+            return None  # the goal is ahead of the feet: steps, not a body move
+        goal = nearest_inside_point_W(feet, goal_xy, BALANCE_MARGIN_M)
+        if goal is None:
+            return None
+        if np.linalg.norm(self.check.com_W(state)[:2] - goal) < 0.5 * ARRIVAL_M:
             return None
         probe = np.array([goal[0], goal[1], float(state.base_position_W[2])])
         u_f, u_n = reference_directions(tau, self.terrain, probe)
@@ -1184,15 +1235,17 @@ class LocalPlanner:
         """Why planning must stop now ("" to go on): goal, cycles, time budget, stuck.
 
         Before the goal test, the :meth:`arrival` move is tried (once per keyframe) when
-        the goal is inside the support polygon but the COM not yet near it.
+        the COM is farther than ``ARRIVAL_M`` from the goal, also within ``goal_tol_m``: a
+        walk ends over its goal where the feet allow, not at the tolerance's edge (the
+        feedback run of stepdown8cm ended 5.0 cm off, its plan 4.8 cm).
         """
         st = self.settings
         if interrupts.requested():
             return f"interrupted after {walk.steps} steps; the plan so far is kept"
         dist = self.distance_to_goal(walk.state, run)
-        if dist > st.goal_tol_m and run.arrival_tried != len(walk.keyframes):
+        if dist > ARRIVAL_M and run.arrival_tried != len(walk.keyframes):
             run.arrival_tried = len(walk.keyframes)
-            moved = self.arrival(walk.state, run.goal, run.tau)
+            moved = self.arrival(walk.state, run.goal, run.tau, dist <= st.goal_tol_m)
             if moved is not None:
                 walk.add_body_move(*moved)
                 dist = self.distance_to_goal(walk.state, run)

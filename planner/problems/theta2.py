@@ -45,6 +45,7 @@ from planner.heuristics import frame_from_directions
 from planner.kinematics import hip_point_B
 from planner.lie import coords_from_pose
 from planner.problems.base import (
+    FEASIBILITY_TOL,
     ThetaOptions,
     ThetaProblem,
     ThetaSolution,
@@ -68,6 +69,12 @@ LANDING_WEIGHT = 0.1  # gamma of the landing joints' closeness to theta_nor (kee
 SWAY_ROUNDS = 3  # re-solves with the sway-stiffness rows, at most (each refreezes G)
 SWAY_SLACK = 0.10  # the rows ask this much more than the bound (their G part is frozen)
 _TRIL = np.tril_indices(6)  # the 21 entries of a symmetric 6 x 6 matrix's lower triangle
+
+
+def _only_torque_or_sway(sol: ThetaSolution) -> bool:
+    """Whether a solution misses only the torque or sway check (solved with their rows next)."""
+    rest = [v for k, v in sol.violations.items() if k not in ("torque", "sway")]
+    return sol.x is not None and max(rest, default=0.0) <= FEASIBILITY_TOL
 
 
 def _sway_of(sol: ThetaSolution) -> float:
@@ -424,11 +431,15 @@ class Theta2(ThetaProblem):
                 return pos, np.array([r.joints_rad for r in legs])
         return start.base_position_W, start.joints_rad
 
-    def solve(self, start: State, rc_star_W, u_f, u_n, swing_target_W=None) -> ThetaSolution:
+    def solve(
+        self, start: State, rc_star_W, u_f, u_n, swing_target_W=None, hint: State | None = None
+    ) -> ThetaSolution:
         """Theta2(r_c*, tau, r_1*..r_4*, i_f) of eq. 8, warm-started at ``start``.
 
         ``swing_target_W`` (optional, three supporting legs): the next foothold of the leg
         that will swing; the body then keeps that leg's hip within reach of it.
+        ``hint`` (optional): a pose near the expected optimum, e.g. the precomputed plan's
+        for this step (8.3-8.4), tried as the start when the others fail.
         """
         p = self.params(start, rc_star_W, u_f, u_n, swing_target_W)
         sol = self.solve_packed(p, self.initial_guess(start, p))
@@ -439,6 +450,17 @@ class Theta2(ThetaProblem):
             again = self.solve_packed(p, self.initial_guess(start, p, turned=True))
             if again.feasible or again.max_violation() < sol.max_violation():
                 sol = again
+        if not sol.feasible and hint is not None:
+            # from the hint's body pose, the legs re-solved onto the start's feet: a
+            # measured state 1 cm off the plan's (barrier75mm's FR knee 0.08 rad from its
+            # limit) stalled at "Maximum_Iterations_Exceeded" 0.5 mm from the plan's pose
+            near = hint.copy()
+            near.feet_W = np.array(start.feet_W, float).copy()
+            again = self.solve_packed(p, self.initial_guess(near, p))
+            if again.feasible or _only_torque_or_sway(again) or (
+                not _only_torque_or_sway(sol) and again.max_violation() < sol.max_violation()
+            ):
+                sol = again  # (a pose short only of torque or sway: their rows next)
         if (
             not sol.feasible
             and sol.x is not None
