@@ -239,7 +239,9 @@ def replan_rest(robot, terrain, mu, settings, state, goal_xy, tau):
     When the precomputed plan's steps no longer fit the measured state (barrier75mm: the
     robot 1 cm off the plan's pose beside the barrier, a knee near its limit), the soft
     planner (8.2, with its look-ahead and retrace) plans from there to the goal within
-    ``REPLAN_BUDGET_S``; its steps become the guide. None when it makes no step.
+    ``REPLAN_BUDGET_S``; its steps become the guide. None when it does not reach the goal:
+    barrier9cm's two re-plans stopped after 7 and 12 steps, followed into their dead end,
+    where the gait queue's greedy steps from the measured state reach the goal.
     """
     from dataclasses import replace
 
@@ -249,7 +251,7 @@ def replan_rest(robot, terrain, mu, settings, state, goal_xy, tau):
         robot, terrain, mu=mu, settings=replace(settings, time_budget_s=REPLAN_BUDGET_S)
     )
     res = local.plan(state.base_position_W[:2], goal_xy, tau=tau, start_state=state)
-    if res.stats["steps"] == 0:
+    if not res.reached_goal or res.stats["steps"] == 0:
         return None
     lift = [np.array([x, y, float(terrain.height(np.array(x), np.array(y)))])
             for x, y in (state.base_position_W[:2], np.asarray(goal_xy, float)[:2])]  # fmt: skip
@@ -320,12 +322,12 @@ def run_feedback(
     in 8.4 (:func:`correct_cycle`; gen:14's trailing hind leg at a 7 cm step up, a hind leg
     stretched on relief), unless the corrected step fails a gate of
     :func:`_follow_corrected` (reach, balance, leg links) or ``correct_plan_steps`` is
-    False. Theta2 of a plan step is also tried from the plan's own body pose
-    (:func:`planned_body_poses`), and aimed at it when its optimum has no clear way there.
-    After ``GUIDE_FAILS`` failed cycles in a row the rest of the walk is planned anew from
-    the measured state (:func:`replan_rest`, at most ``REPLANS`` times) and its steps are
-    followed; after that, or past the plan's last step, the gait queue and Lambda_t take
-    over. Measurements come from
+    False. Theta2 of a plan step is also started from the plan's own body pose
+    (:func:`planned_body_poses`). After ``GUIDE_FAILS`` failed cycles in a row the rest of
+    the walk is planned anew from the measured state (:func:`replan_rest`, at most
+    ``REPLANS`` times) and its steps are followed when it reaches the goal; after that, or
+    past the plan's last step, the gait queue and Lambda_t take over. Measurements come
+    from
     ``source`` (default:
     :class:`SimulatedMocap` of the simulator with ``noise``: position_noise_m,
     angle_noise_rad, joint_noise_rad, latency_s, seed). Stops at the goal, after
@@ -484,7 +486,7 @@ def run_feedback(
             "plan_steps": len(guide),
             "plan_steps_followed": followed,  # landed on the plan's foothold
             "plan_steps_corrected": corrected,  # the plan's own step, corrected (8.4)
-            "replans": replans,  # steps of each re-plan of the rest of the walk
+            "replans": replans,  # steps of each re-plan of the rest (0: it did not reach)
             "arrivals": arrivals,  # arrival moves executed (four feet, COM over the goal)
             "planner_solves": local.stats,
             "planner_failures": local.failures[-50:],

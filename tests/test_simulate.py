@@ -425,6 +425,32 @@ def test_feedback_replans_the_rest_when_the_plans_steps_fail(short_plan, monkeyp
         assert np.linalg.norm(landed[:2] - foot[:2]) < 0.015, (k, landed, foot)
 
 
+def test_a_replan_is_followed_only_when_it_reaches_the_goal(short_plan, monkeypatch):
+    """replan_rest plans from a given state to the goal; a re-plan that stops short (its own
+    dead end) is not returned, so feedback does not walk into it."""
+    from planner.execution import _planned_settings, replan_rest
+    from planner.local.soft import SoftPlanner
+    from planner.trajectory import Trajectory
+
+    robot, terrain = short_plan.load_robot(), short_plan.load_terrain()
+    st = _planned_settings(short_plan)
+    start = short_plan.keyframe_states()[0]
+    goal = short_plan.goal[:2]
+    tau = Trajectory.straight(short_plan.start[:2], goal, terrain, 0.15)
+    new = replan_rest(robot, terrain, short_plan.friction, st, start, goal, tau)
+    assert new is not None and new.outcome["reached_goal"] and len(planned_steps(new)) > 4
+    np.testing.assert_allclose(new.keyframes[0].base_position, start.base_position_W)
+    real = SoftPlanner.plan
+
+    def short(self, *args, **kw):
+        res = real(self, *args, **kw)
+        res.reached_goal = False
+        return res
+
+    monkeypatch.setattr(SoftPlanner, "plan", short)
+    assert replan_rest(robot, terrain, short_plan.friction, st, start, goal, tau) is None
+
+
 def test_planned_body_poses_are_the_plans_at_each_step(short_plan):
     """Each step's body pose is one the plan passes in that step (the swing keyframe's),
     with every foot on the ground where that step starts (the Theta2 hint of feedback)."""

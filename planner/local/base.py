@@ -499,7 +499,8 @@ class LocalPlanner:
 
         With ``swing_target_W`` the body also keeps ``leg``'s hip within reach of its next
         foothold (Theta2's swing-ready constraint). ``hint``: Theta2's last starting pose
-        (:meth:`planner.problems.theta2.Theta2.solve`).
+        (:meth:`planner.problems.theta2.Theta2.solve`). (Aiming at the hint's own pose when
+        the optimum's path fails was tried: barrier9cm's feedback run then stalled.)
         """
         support = tuple(i for i in range(4) if i != leg)
         rc = self.body_target(state, leg, shrink, swing_target_W, tau)
@@ -532,24 +533,6 @@ class LocalPlanner:
                 if not why2 or ("path margin" in why2) == ("path margin" in why):
                     sol, path, why = again, path2, why2
         path, why = self._via_if_swept(state, sol.state, path, why, u_f, u_n)
-        if why and hint is not None:
-            # the hint's own body pose as the target (feedback, 8.3: the precomputed plan
-            # went there): from a measured barrier75mm state 1 cm off the plan's, Theta2's
-            # optimum lay 4 cm farther, where the way passes a knee beyond its limit
-            alt = self.theta2(support, landing).solve(
-                state, self.check.com_W(hint), u_f, u_n, swing_target_W, hint
-            )
-            self._count("theta2", alt.feasible)
-            if alt.feasible:
-                alt.state.support = support
-                alt_path = interpolate_leaf(
-                    self.robot, self.terrain, state, alt.state, self.settings.body_samples
-                )
-                alt_path, alt_why = self._via_if_swept(
-                    state, alt.state, alt_path, self.path_problem(alt_path), u_f, u_n
-                )
-                if not alt_why:
-                    sol, path, why = alt, alt_path, ""
         if why:
             sol.feasible = False
             sol.diagnosis = f"body move onto three legs: {why}"

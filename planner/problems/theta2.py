@@ -457,8 +457,10 @@ class Theta2(ThetaProblem):
             near = hint.copy()
             near.feet_W = np.array(start.feet_W, float).copy()
             again = self.solve_packed(p, self.initial_guess(near, p))
-            if again.feasible or _only_torque_or_sway(again) or (
-                not _only_torque_or_sway(sol) and again.max_violation() < sol.max_violation()
+            if (
+                again.feasible
+                or _only_torque_or_sway(again)
+                or (not _only_torque_or_sway(sol) and again.max_violation() < sol.max_violation())
             ):
                 sol = again  # (a pose short only of torque or sway: their rows next)
         if (
