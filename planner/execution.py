@@ -246,21 +246,16 @@ def replan_rest(robot, terrain, mu, settings, state, goal_xy, tau):
     from dataclasses import replace
 
     from planner.local.soft import SoftPlanner
+    from planner.walk import plan_of
 
     local = SoftPlanner(
         robot, terrain, mu=mu, settings=replace(settings, time_budget_s=REPLAN_BUDGET_S)
     )
-    res = local.plan(state.base_position_W[:2], goal_xy, tau=tau, start_state=state)
+    start_xy = state.base_position_W[:2]
+    res = local.plan(start_xy, goal_xy, tau=tau, start_state=state)
     if not res.reached_goal or res.stats["steps"] == 0:
         return None
-    lift = [np.array([x, y, float(terrain.height(np.array(x), np.array(y)))])
-            for x, y in (state.base_position_W[:2], np.asarray(goal_xy, float)[:2])]  # fmt: skip
-    outcome = {"reached_goal": bool(res.reached_goal), "message": res.message,
-               "distance_to_goal": float(res.distance_to_goal_m)}  # fmt: skip
-    return Plan.build(
-        robot, terrain, mu, lift[0], lift[1], res.keyframes, res.samples, res.times,
-        outcome, res.stats,
-    )  # fmt: skip
+    return plan_of(robot, terrain, mu, start_xy, goal_xy, res, {})
 
 
 def plan_step_cycles(plan: Plan) -> list[tuple[int, int]] | None:

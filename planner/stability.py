@@ -82,6 +82,8 @@ def nearest_inside_point_W(feet_W: ArrayLike, p_W: ArrayLike, margin_m: float):
     """
     pts = np.asarray(feet_W, dtype=float).reshape(-1, 3)[:, :2]
     p = np.asarray(p_W, dtype=float).reshape(-1)[:2]
+    if polygon_margin_m(feet_W, p) >= margin_m:
+        return p.copy()
     hull = _convex_hull(pts)
     if len(hull) < 3:
         return None
@@ -101,8 +103,6 @@ def nearest_inside_point_W(feet_W: ArrayLike, p_W: ArrayLike, margin_m: float):
         if len(poly) < 3:
             return None
     inset = np.array(poly)
-    if polygon_margin_m(np.c_[inset, np.zeros(len(inset))], p) >= 0.0:
-        return p.copy()
     best, best_d = None, np.inf
     for a, b in zip(inset, np.roll(inset, -1, axis=0), strict=True):
         e = b - a

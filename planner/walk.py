@@ -84,12 +84,8 @@ def check_endpoints(robot, terrain, start_xy, goal_xy, names=("start", "goal")) 
             )
 
 
-def assemble_plan(robot, terrain, mu, start_xy, goal_xy, result: LocalPlan, stats: dict):
-    """The ``stratawalk.plan/1`` plan of a local plan, validated; returns (plan, report).
-
-    ``stats`` are added to the local plan's. A plan the validator rejects is not reported
-    as reaching the goal, whatever the local planner said.
-    """
+def plan_of(robot, terrain, mu, start_xy, goal_xy, result: LocalPlan, stats: dict) -> Plan:
+    """The ``stratawalk.plan/1`` plan of a local plan, not validated; ``stats`` added."""
 
     def lift(xy):
         x, y = float(xy[0]), float(xy[1])
@@ -100,7 +96,7 @@ def assemble_plan(robot, terrain, mu, start_xy, goal_xy, result: LocalPlan, stat
         "distance_to_goal": float(result.distance_to_goal_m),
         "message": result.message,
     }
-    plan = Plan.build(
+    return Plan.build(
         robot,
         terrain,
         mu,
@@ -112,6 +108,15 @@ def assemble_plan(robot, terrain, mu, start_xy, goal_xy, result: LocalPlan, stat
         outcome,
         dict(result.stats, **stats),
     )
+
+
+def assemble_plan(robot, terrain, mu, start_xy, goal_xy, result: LocalPlan, stats: dict):
+    """The ``stratawalk.plan/1`` plan of a local plan, validated; returns (plan, report).
+
+    ``stats`` are added to the local plan's. A plan the validator rejects is not reported
+    as reaching the goal, whatever the local planner said.
+    """
+    plan = plan_of(robot, terrain, mu, start_xy, goal_xy, result, stats)
     report = check_plan(plan)
     plan.stats["validation"] = {"ok": report.ok, "violations": report.by_kind()}
     if not report.ok and plan.outcome["reached_goal"]:

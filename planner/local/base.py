@@ -532,7 +532,12 @@ class LocalPlanner:
                 why2 = self.path_problem(path2)
                 if not why2 or ("path margin" in why2) == ("path margin" in why):
                     sol, path, why = again, path2, why2
-        path, why = self._via_if_swept(state, sol.state, path, why, u_f, u_n)
+        if "path margin" in why:  # a leg link sweeps past an edge between two clear poses
+            via_path = self._via_path(state, sol.state, path, u_f, u_n)
+            if via_path is not None:
+                why2 = self.path_problem(via_path)
+                if not why2:
+                    path, why = via_path, ""
         if why:
             sol.feasible = False
             sol.diagnosis = f"body move onto three legs: {why}"
@@ -542,18 +547,6 @@ class LocalPlanner:
         if land is not None:
             sol.state.info["landing"] = land
         return sol, path
-
-    def _via_if_swept(self, start: State, end: State, path: list[State], why: str, u_f, u_n):
-        """(path, why), through a via pose (:meth:`_via_path`) if a link sweeps an edge.
-
-        Used when ``why`` is a leg link inside its path margin and the via path passes;
-        else ``path`` and ``why`` as given.
-        """
-        if "path margin" in why:  # a leg link sweeps past an edge between two clear poses
-            via_path = self._via_path(start, end, path, u_f, u_n)
-            if via_path is not None and not self.path_problem(via_path):
-                return via_path, ""
-        return path, why
 
     def _via_path(self, start: State, end: State, path: list[State], u_f, u_n):
         """A body move through a via pose where ``path`` brings a leg link nearest the terrain.
