@@ -186,6 +186,33 @@ def test_hard_planner_walks_on_flat_ground(littledog):
     assert plan.stats["planner"] == "hard" and plan.stats["solves"]["theta1"]["feasible"] > 0
 
 
+def test_hard_planner_climbs_a_step_with_the_com_over_tau(littledog):
+    """8.1 up a 4 cm step (issue 15 item 3): the plan passes the validator and every body
+    move onto three legs ends with the COM over tau, beside it by at most the lateral band."""
+    from planner.local.hard import LATERAL_BAND_M
+    from planner.terrain import Terrain
+    from planner.walk import plan_walk
+
+    step = Terrain.from_spec(
+        {"name": "step4cm", "kind": "step", "x": 0.42, "height": 0.04, "friction": 0.7,
+         "length": 1.5}
+    )  # fmt: skip
+    plan = _checked(plan_walk(littledog, step, (0.72, 0.0), (0.2, 0.0), "hard"))
+    assert plan.outcome["reached_goal"], plan.outcome["message"]
+    feet = np.array(plan.keyframes[-1].feet)
+    assert np.all(feet[:, 0] > 0.42 + 0.02) and np.allclose(feet[:, 2], 0.04, atol=1e-3)
+    on_three = [s for s in plan.keyframe_states() if len(s.support) == 3]
+    assert len(on_three) >= 8
+    # tau runs along y = 0 from start to goal: the COM (Pinocchio's) beside it
+    model, data = littledog.model, littledog.model.createData()
+    beside = [
+        abs(float(pin.centerOfMass(model, data, littledog.q_from(
+            s.base_position_W, s.base_quaternion_xyzw, s.joints_rad))[1]))
+        for s in on_three
+    ]  # fmt: skip
+    assert max(beside) <= LATERAL_BAND_M + 1e-3
+
+
 def _dead_end_rule(planner):
     """FL cannot step after a full-stride HL step: only tracing back gets past it."""
     real = planner.step

@@ -103,6 +103,38 @@ def test_theta1_hits_the_com_target(dog, name, x):
 
 
 @pytest.mark.parametrize("name,x", STANCES)
+def test_theta1_with_a_height_band_pins_the_com_over_the_target(dog, name, x):
+    """Beyond eq. 7 (the hard planner's Theta1): the COM's horizontal position is r_c*'s,
+    its height anywhere within the band; a target 6 cm above the stance's COM is out of
+    the legs' comfort pinned in 3-D and reached within a 10 cm band, on three feet with the
+    eq. 5 forces in their cones and the COM inside the triangle by the balance margin."""
+    terrain, placed, u_f, u_n = _placed(dog, name, x)
+    start = placed.state
+    support = (1, 2, 3)
+    com0 = Theta1(dog, terrain, support=support).check.com_W(start)
+    # over the support triangle's incentre, 6 cm above the start's COM height
+    tri = start.feet_W[list(support)]
+    side = np.array([np.linalg.norm(tri[(i + 1) % 3] - tri[(i + 2) % 3]) for i in range(3)])
+    inc = (side[:, None] * tri).sum(axis=0) / side.sum()
+    rc = np.array([inc[0], inc[1], com0[2] + 0.06])
+    band = Theta1(dog, terrain, support=support, height_band_m=0.10)
+    sol = band.solve(start, rc, u_f, u_n)
+    assert sol.feasible, sol.diagnosis
+    com = band.check.com_W(sol.state)
+    assert np.linalg.norm(com[:2] - rc[:2]) < 1e-6
+    assert abs(com[2] - rc[2]) <= 0.10 + 1e-6 and com[2] < rc[2] - 1e-3  # it sank
+    mu = terrain_mu(terrain)
+    assert statics.forces_in_friction_cones(
+        sol.state.forces_W, mu, support, terrain.normal(sol.state.feet_W)
+    )
+    from planner.stability import support_margin_m
+
+    assert support_margin_m(tri, com) >= band.options.balance_margin_m - 1e-6
+    pinned = Theta1(dog, terrain, support=support).solve(start, rc, u_f, u_n)
+    assert not pinned.feasible and "com" in pinned.violations
+
+
+@pytest.mark.parametrize("name,x", STANCES)
 def test_theta3_places_a_foot(dog, name, x):
     terrain, placed, u_f, u_n = _placed(dog, name, x)
     start = placed.state

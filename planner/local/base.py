@@ -511,6 +511,30 @@ class LocalPlanner:
         if not sol.feasible:
             return sol, []
         sol.state.support = support
+
+        def again(rolled: State):
+            return self.theta2(support, landing).solve(rolled, rc, u_f, u_n, swing_target_W)
+
+        sol, path, why = self.body_path(state, sol, again, u_f, u_n)
+        if why:
+            sol.feasible = False
+            sol.diagnosis = f"body move onto three legs: {why}"
+            return sol, []
+        land = sol.state.info.get("landing")
+        sol.state = self.path_end(path, support)
+        if land is not None:
+            sol.state.info["landing"] = land
+        return sol, path
+
+    def body_path(self, state: State, sol, again, u_f, u_n):
+        """(solution, samples, why) of the body move from ``state`` to ``sol.state``.
+
+        The leaf's samples (eq. 6b); where they fail :meth:`path_problem`, ``again(rolled)``
+        solves the move once more from the stance feet where the path left them, and a
+        leg link sweeping an edge gets a via pose (:meth:`_via_path`). ``why`` is "" for a
+        path that passes. ``sol.state.support`` must be set.
+        """
+        support = sol.state.support
         path = interpolate_leaf(
             self.robot, self.terrain, state, sol.state, self.settings.body_samples
         )
@@ -521,32 +545,24 @@ class LocalPlanner:
             # rolled feet, and interpolate to that pose
             rolled = state.copy()
             rolled.feet_W = path[-1].feet_W.copy()
-            again = self.theta2(support, landing).solve(rolled, rc, u_f, u_n, swing_target_W)
-            self._count("theta2", again.feasible)
-            if again.feasible:
-                again.state.support = support
-                again.state.feet_W = state.feet_W.copy()
+            second = again(rolled)
+            self._count(second.problem.lower(), second.feasible)
+            if second.feasible:
+                second.state.support = support
+                second.state.feet_W = state.feet_W.copy()
                 path2 = interpolate_leaf(
-                    self.robot, self.terrain, state, again.state, self.settings.body_samples
+                    self.robot, self.terrain, state, second.state, self.settings.body_samples
                 )
                 why2 = self.path_problem(path2)
                 if not why2 or ("path margin" in why2) == ("path margin" in why):
-                    sol, path, why = again, path2, why2
+                    sol, path, why = second, path2, why2
         if "path margin" in why:  # a leg link sweeps past an edge between two clear poses
             via_path = self._via_path(state, sol.state, path, u_f, u_n)
             if via_path is not None:
                 why2 = self.path_problem(via_path)
                 if not why2:
                     path, why = via_path, ""
-        if why:
-            sol.feasible = False
-            sol.diagnosis = f"body move onto three legs: {why}"
-            return sol, []
-        land = sol.state.info.get("landing")
-        sol.state = self.path_end(path, support)
-        if land is not None:
-            sol.state.info["landing"] = land
-        return sol, path
+        return sol, path, why
 
     def _via_path(self, start: State, end: State, path: list[State], u_f, u_n):
         """A body move through a via pose where ``path`` brings a leg link nearest the terrain.

@@ -7,19 +7,23 @@ is cycled; for each leg i_f of S
    *exactly on tau*: the search Omega_1 (section 7.6, eq. 11) looks along tau for the
    largest lambda at which hard persuasion Theta1 (7.2) is feasible. Feasibility along
    lambda is an interval (the COM must lie over the support triangle and every leg within
-   reach), which need not contain the body's current lambda, so a few probes at
-   lambda_now + stride x (1, 1/2, 0, -1/2, -1) find a feasible lambda first, and bisection
-   (:func:`planner.search.omega`) then pushes it forward toward the first infeasible probe;
+   reach), which need not contain the body's current lambda. Theta1's own force precheck
+   (no solve) screens a window of lambdas around the body's first, and Omega's bisection
+   runs over those that pass, farthest first; a lambda counts as feasible only when the
+   body path to its pose passes every sample check too;
 2. i_f is lifted, swung and placed with Theta3 near Lambda_t, as in the soft planner.
 
 A failure (no feasible lambda, or no foothold) moves on to the next leg of S: unlike the
 gait step queue of 8.2, a failed leg waits a whole cycle (section 8.2, comment ii). The
 planner is stuck after ``max_fails_in_row`` failures in a row (two cycles by default).
-Less robust than 8.2: the COM cannot leave tau to find balance. Beyond the paper, one
-freedom: the COM may sit beside tau, by at most ``LATERAL_BAND_M``, on the side of the
-support triangle's incentre. On tau itself a crawl's three-leg COM is 16 mm from the
-diagonal edge at best on flat ground, and MuJoCo tips over below about 20 mm
-(:mod:`planner.stability`); lambda is still searched along tau.
+Less robust than 8.2: the COM cannot leave tau to find balance. Beyond the paper, two
+freedoms: the COM may sit beside tau, by at most ``LATERAL_BAND_M``, where it is deepest
+inside the support triangle (on tau itself a crawl's three-leg COM is 16 mm from the
+diagonal edge at best on flat ground, and MuJoCo tips over below about 20 mm,
+:mod:`planner.stability`); and its height is free within ``HEIGHT_BAND_M`` of the target's
+(Theta1's ``height_band_m``: pinned in 3-D, the COM stood 7 mm too high for a leg's reach
+on slope10). Lambda is still searched along tau, and the footholds, body paths (rolled
+feet, via poses) and swings are the soft planner's.
 """
 
 from __future__ import annotations
@@ -29,17 +33,30 @@ import numpy as np
 from planner.heuristics import (
     reference_directions,
     support_body_target_W,
-    support_incentre_W,
 )
-from planner.interpolate import interpolate_leaf
 from planner.local.base import TORQUE_FRACTION, LocalPlanner, Step, Walk, _Run
 from planner.problems import Theta1
-from planner.search import omega
+from planner.problems.base import ThetaSolution
+from planner.stability import support_margin_m
 from planner.state import State
 from planner.trajectory import Trajectory
 
-PROBES = (1.0, 0.5, 0.0, -0.5, -1.0)  # lambda offsets in strides, most ambitious first
-LATERAL_BAND_M = 0.03  # the COM target may sit this far beside tau, toward the incentre
+SCAN_STRIDES = (-1.0, 1.5)  # the window of lambdas screened, in strides from the body's
+SCAN_STEP = 0.125  # ... every this many strides
+MAX_SCREENED_SOLVES = 4  # Theta1 solves over the screened lambdas before Omega's bisection
+LATERAL_BAND_M = 0.03  # the COM target may sit this far beside tau
+HEIGHT_BAND_M = 0.03  # the COM's height is free this far around the target's (Theta1)
+LATERAL_SAMPLES = 13  # offsets tried across the band (5 mm apart)
+
+
+def _unheld(why: str) -> ThetaSolution:
+    """A Theta1 failure for a window of lambdas none of whose COM targets can be held."""
+    return ThetaSolution(
+        problem="Theta1", status="Infeasible_Forces", feasible=False, state=None,
+        objective=float("inf"), objective_terms={}, iterations=0, solve_time_s=0.0,
+        build_time_s=0.0, diagnosis=f"Theta1: no COM target along tau can be held: {why}",
+        violations={"forces": float("inf")},
+    )  # fmt: skip
 
 
 class HardPlanner(LocalPlanner):
@@ -57,8 +74,9 @@ class HardPlanner(LocalPlanner):
         key = tuple(sorted(support))
         if key not in self._theta1:
             self._theta1[key] = Theta1(
-                self.robot, self.terrain, support=key, options=self.settings.theta, mu=self.mu
-            )
+                self.robot, self.terrain, support=key, options=self.settings.theta, mu=self.mu,
+                height_band_m=HEIGHT_BAND_M,
+            )  # fmt: skip
         return self._theta1[key]
 
     def holds_on_three(self, state: State, leg: int) -> bool:
@@ -75,29 +93,41 @@ class HardPlanner(LocalPlanner):
         return bool(res.ratio <= TORQUE_FRACTION)
 
     def lateral_offset(self, state: State, leg: int, tau: Trajectory, lam: float) -> np.ndarray:
-        """Horizontal offset [m] of the COM target from tau, toward the support incentre."""
+        """Horizontal offset [m] of the COM target from tau(lam), within ``LATERAL_BAND_M``.
+
+        The offset beside tau (across u_f) that puts the COM deepest inside the three stance
+        feet's triangle: the support margin is concave along the line, so the best of
+        ``LATERAL_SAMPLES`` evenly spaced offsets is within half a spacing of its optimum.
+        """
         p = np.asarray(tau.point(lam), float).reshape(3)
         u_f, _ = reference_directions(tau, self.terrain, p, lam=lam)
         side = np.cross([0.0, 0.0, 1.0], u_f)
         side /= max(float(np.linalg.norm(side)), 1e-12)
-        s = float(side @ (support_incentre_W(state, leg) - p))
-        return float(np.clip(s, -LATERAL_BAND_M, LATERAL_BAND_M)) * side
+        sup = state.feet_W[[i for i in range(4) if i != leg]]
+        offsets = np.linspace(-LATERAL_BAND_M, LATERAL_BAND_M, LATERAL_SAMPLES)
+        margins = [support_margin_m(sup, p + s * side) for s in offsets]
+        return float(offsets[int(np.argmax(margins))]) * side
 
     def search_body(self, state: State, leg: int, tau: Trajectory, stride_m: float, target_W):
-        """Omega_1 for the body move before ``leg`` swings: (Theta1 solution, lambda) or None.
+        """Omega_1 for the body move before ``leg`` swings: ((solution, path), lambda).
 
-        Returns the feasible solution with the largest lambda found, else (last failed
-        solution, None).
+        The lambdas of a window around the body's (``SCAN_STRIDES``, every ``SCAN_STEP``
+        strides) are screened first by Theta1's own force precheck (eq. 5 forces in their
+        cones, the COM ``balance_margin_m`` inside the triangle; no solve), each with its
+        best offset beside tau. Theta1 is then solved at the farthest that passes; if it
+        fails there, Omega's bisection (eq. 11) runs over the screened lambdas nearer the
+        body, ``MAX_SCREENED_SOLVES`` solves in all. A lambda is feasible when Theta1 is
+        and its body path passes (:meth:`LocalPlanner.body_path`). Returns the farthest
+        feasible solution found with its path, else (the last failure, None).
         """
         problem = self.theta1([i for i in range(4) if i != leg])
         lam_now = float(tau.closest_lambda(self.check.com_W(state)))
-        lams = [float(tau.clip(lam_now + f * stride_m)) for f in PROBES]
-        offset = self.lateral_offset(state, leg, tau, lam_now)
         feet = self._plane_feet(state, leg, target_W)  # the same for every lambda
 
         def targets(lam: float):
-            """r_c* on tau (beside it by ``offset``), at the height the footholds ask for."""
-            rc = np.asarray(tau.point(lam), float).reshape(3) + offset
+            """r_c* beside tau, at the height the footholds ask for, and (u_f, u_n)."""
+            rc = np.asarray(tau.point(lam), float).reshape(3)
+            rc = rc + self.lateral_offset(state, leg, tau, lam)
             u_f, u_n = reference_directions(tau, self.terrain, rc, lam=lam)
             if feet is not None:
                 rc[2], u_n = support_body_target_W(
@@ -105,39 +135,63 @@ class HardPlanner(LocalPlanner):
                 )
             return rc, u_f, u_n
 
+        lo, hi = SCAN_STRIDES
+        count = int(round((hi - lo) / SCAN_STEP)) + 1
+        offsets = np.linspace(lo, hi, count) * stride_m
+        window = sorted({float(tau.clip(lam_now + f)) for f in offsets})
+        held, why = [], ""
+        for lam in reversed(window):  # farthest first
+            ok, why_not = problem.force_precheck(state, targets(lam)[0])
+            if ok:
+                held.append(lam)
+            elif not why:
+                why = why_not
+        if not held:
+            return _unheld(why), None
+
         last = None
-        for k, lam in enumerate(lams):
+
+        def solve(lam: float):
+            """(solution, body path) at ``lam``, or None (``last`` says why)."""
+            nonlocal last
             rc, u_f, u_n = targets(lam)
             sol = problem.solve(state, rc, u_f, u_n, target_W)
             self._count("theta1", sol.feasible)
             if sol.feasible and not self.holds_on_three(sol.state, leg):
                 sol.feasible = False
                 sol.diagnosis = "the three-leg stance needs joint torques near the limits"
-            if not sol.feasible:
-                last = sol
-                continue
-            if k == 0:
-                return sol, lam
-            # push forward by bisection toward the last infeasible probe (eq. 11)
-            res = omega(
-                problem,
-                sol.state,
-                tau,
-                lam,
-                lams[k - 1],
-                com_offset_W=offset,
-                max_solves=4,
-                swing_target_W=target_W,
-                targets=targets,
-            )
-            self.stats["theta1"][0] += res.solves
-            self.stats["theta1"][1] += len(res.xi)
-            if res.best is not None and res.best[1] > lam and self.holds_on_three(res.best[0], leg):
-                best_state, best_lam = res.best
-                sol.state = best_state
-                return sol, best_lam
-            return sol, lam
-        return last, None
+            if sol.feasible:
+                sol.state.support = problem.support
+                sol, path, why = self.body_path(
+                    state, sol, lambda rolled: problem.solve(rolled, rc, u_f, u_n, target_W),
+                    u_f, u_n,
+                )  # fmt: skip
+                if not why:
+                    return sol, path
+                sol.feasible = False
+                sol.diagnosis = why
+            last = sol
+            return None
+
+        # the farthest held lambda; else a bisection over the held list for the farthest
+        # feasible one (feasibility is taken as an interval of lambdas up to some point)
+        good = None
+        first = solve(held[0])
+        if first is not None:
+            return first, held[0]
+        lo, hi = 1, len(held) - 1
+        for _ in range(MAX_SCREENED_SOLVES - 1):
+            if lo > hi:
+                break
+            k = (lo + hi) // 2
+            sol = solve(held[k])
+            if sol is not None:
+                good, hi = (sol, held[k]), k - 1
+            else:
+                lo = k + 1
+        if good is None:
+            return last, None
+        return good
 
     def hard_step(self, state: State, leg: int, tau: Trajectory, stride_m: float) -> Step:
         """One step of section 8.1: Omega_1 body move, then Theta3 placement.
@@ -157,19 +211,12 @@ class HardPlanner(LocalPlanner):
 
     def _hard_step_to(self, state: State, leg: int, tau: Trajectory, stride_m: float, target):
         """Omega_1 body move ready for the foothold ``target``, then Theta3 placement."""
-        sol, lam = self.search_body(state, leg, tau, stride_m, target)
+        found, lam = self.search_body(state, leg, tau, stride_m, target)
         if lam is None:
-            why = sol.diagnosis if sol is not None else "no probe"
+            why = found.diagnosis if found is not None else "no probe"
             return Step(leg, False, state, None, None, [], [], "body_move", f"Omega_1: {why}")
-        moved = sol.state
-        moved.support = tuple(i for i in range(4) if i != leg)
-        body_path = interpolate_leaf(
-            self.robot, self.terrain, state, moved, self.settings.body_samples
-        )
-        why = self.path_problem(body_path)
-        if why:
-            return Step(leg, False, state, None, None, [], [], "body_move", f"Omega_1: {why}")
-        moved = self.path_end(body_path, moved.support)
+        sol, body_path = found
+        moved = self.path_end(body_path, sol.state.support)
         sol3, swing_path = self.swing(moved, leg, tau, stride_m, target)
         if not sol3.feasible:
             return Step(

@@ -9,6 +9,12 @@ On three legs the precheck also asks the COM ``options.balance_margin_m`` inside
 triangle (:mod:`planner.stability`): Omega's largest feasible lambda then stops short of
 the edge by that margin instead of at it.
 Objective: sigma1 * sigma2 * sigma3 (as logs).
+
+Beyond the paper, ``height_band_m`` > 0 pins only the COM's horizontal position to r_c*
+(its height within the band, preferring r_c*'s by sigma4, the eq. 5 forces then checked in
+the problem as Theta2 does): tau is a path over the ground whose height the planner only
+guesses (:func:`planner.heuristics.support_body_target_W`), and a COM pinned 7 mm too high
+left a leg out of reach on slope10. The default 0 is eq. 7 as written.
 """
 
 from __future__ import annotations
@@ -29,6 +35,11 @@ class Theta1(Theta2):
 
     name = "Theta1"
     fix_com = True
+
+    def __init__(self, robot, terrain, support=(0, 1, 2, 3), options=None, mu: float = 0.7,
+                 height_band_m: float = 0.0):  # fmt: skip
+        self.height_band_m = float(height_band_m)
+        super().__init__(robot, terrain, support, options, mu)
 
     def force_precheck(self, start: State, rc_star_W) -> tuple[bool, str]:
         """Whether the eq. 5 forces at COM r_c* satisfy (d) and (e) (section 7.2)."""

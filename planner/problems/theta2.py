@@ -150,7 +150,12 @@ class Theta2(ThetaProblem):
         self.constrain_body_pose(pos, R, phi, s1, s2, u_f, u_n)
         self.constrain_leg_links(pos, R, {i: th[3 * i : 3 * i + 3] for i in range(4)})
         com = com_W_ca(self, pos, R, th)
-        if self.fix_com:
+        band = float(getattr(self, "height_band_m", 0.0))
+        free_height = self.fix_com and band > 0.0
+        if free_height:  # Theta1 with the COM pinned over r_c*, its height within a band
+            self.constrain("com", com[0:2] - rc[0:2])
+            self.constrain("com_height", com[2] - rc[2], -band, band)
+        elif self.fix_com:
             self.constrain("com", com - rc)
         if len(self.support) == 3:
             (leg,) = set(range(4)) - set(self.support)
@@ -169,7 +174,7 @@ class Theta2(ThetaProblem):
             self.maximise_log(
                 "sigma_land", LANDING_WEIGHT, sigma3_ca(th_land - ca.DM(r.theta_nor[leg]), o)
             )
-        if o.forces and not self.fix_com:
+        if o.forces and (free_height or not self.fix_com):
             feet_cols = ca.reshape(feet, 3, 4)
             normal_cols = ca.reshape(normals, 3, 4)
             F = self._eq5_forces_ca(feet_cols, com)
@@ -224,7 +229,9 @@ class Theta2(ThetaProblem):
         self.maximise_log("sigma1", o.weights[0], s1)
         self.maximise_log("sigma2", o.weights[1], s2)
         self.maximise_log("sigma3", o.weights[2], sigma3_ca(d_theta, o))
-        if not self.fix_com:
+        if free_height:
+            self.maximise_log("sigma4", o.weights[3], gaussian_ca(com[2] - rc[2], o.com_length_m))
+        elif not self.fix_com:
             self.maximise_log("sigma4", o.weights[3], gaussian_ca(com - rc, o.com_length_m))
 
     def _constrain_torques(self, R, th, feet_cols, normal_cols, com) -> None:
@@ -615,15 +622,20 @@ class Theta2(ThetaProblem):
                         state.feet_W[list(self.support)], ck.com_W(landed)
                     )
                     v["balance_margin_landing"] = max(need - have, 0.0)
+        band = float(getattr(self, "height_band_m", 0.0))
         if self.fix_com:
-            rc = p[self._p_slices["rc_star"]]
-            v["com"] = float(np.linalg.norm(ck.com_W(state) - rc))
+            off = ck.com_W(state) - p[self._p_slices["rc_star"]]
+            if band > 0.0:  # horizontal pin, height within the band
+                v["com"] = max(float(np.linalg.norm(off[:2])), abs(float(off[2])) - band, 0.0)
+            else:
+                v["com"] = float(np.linalg.norm(off))
         if self.options.forces or self.fix_com:
             viol, forces = ck.forces(state, self.support, self.mu)
             state.forces_W = forces
             if self.options.forces:
                 v["forces"] = max(viol, 0.0)
-        if self.options.forces and not self.fix_com and len(self.support) == 3:
+        free = not self.fix_com or band > 0.0
+        if self.options.forces and free and len(self.support) == 3:
             have = stability.support_margin_m(state.feet_W[list(self.support)], ck.com_W(state))
             v["balance_margin"] = max(self.options.balance_margin_m - have, 0.0)
             res = None
