@@ -423,9 +423,15 @@ class LocalPlanner:
         rc = lambda_c(self.robot, self.terrain, state, leg, self.com_height_m(), k, feet, heading)
         if feet is None or tau is None:
             return rc
-        # lower where a leg would be stretched, not below the body box's clearance: always
-        # beyond ALWAYS_REACH_FRACTION, and to TARGET_REACH_FRACTION when backing off from
-        # a failed step (:meth:`step`)
+        return self.sunk_target(state, leg, rc, tau, swing_target_W, heading)
+
+    def sunk_target(self, state: State, leg: int, rc, tau: Trajectory, swing_target_W, heading):
+        """``rc`` lowered where a leg would be stretched, not below the body box's clearance.
+
+        Always beyond ALWAYS_REACH_FRACTION of a leg's reach, and to TARGET_REACH_FRACTION
+        when backing off from a failed step (:meth:`step`).
+        """
+        rc = np.array(rc, float)
         fraction = TARGET_REACH_FRACTION if self._sink else ALWAYS_REACH_FRACTION
         sink = self._reach_sink_m(state, leg, rc, tau, swing_target_W, fraction)
         if sink < 0.0:

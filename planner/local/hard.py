@@ -11,7 +11,9 @@ is cycled; for each leg i_f of S
    (no solve) screens a window of lambdas around the body's first, and Omega's bisection
    runs over those that pass, farthest first; a lambda counts as feasible only when the
    body path to its pose passes every sample check too;
-2. i_f is lifted, swung and placed with Theta3 near Lambda_t, as in the soft planner.
+2. i_f is lifted, swung and placed with Theta3 near Lambda_t, as in the soft planner
+   (:meth:`LocalPlanner.step` with this planner's :meth:`HardPlanner.body_move`: the
+   same other footholds and back-off as soft).
 
 A failure (no feasible lambda, or no foothold) moves on to the next leg of S: unlike the
 gait step queue of 8.2, a failed leg waits a whole cycle (section 8.2, comment ii). The
@@ -34,7 +36,8 @@ from planner.heuristics import (
     reference_directions,
     support_body_target_W,
 )
-from planner.local.base import TORQUE_FRACTION, LocalPlanner, Step, Walk, _Run
+from planner.local.base import TORQUE_FRACTION
+from planner.local.soft import SoftPlanner
 from planner.problems import Theta1
 from planner.problems.base import ThetaSolution
 from planner.stability import support_margin_m
@@ -59,10 +62,11 @@ def _unheld(why: str) -> ThetaSolution:
     )  # fmt: skip
 
 
-class HardPlanner(LocalPlanner):
+class HardPlanner(SoftPlanner):
     """The fixed-sequence, hard-persuasion planner of section 8.1."""
 
     name = "hard"
+    fixed_sequence = True
 
     def __init__(self, robot, terrain, mu: float | None = None, settings=None):
         super().__init__(robot, terrain, mu, settings)
@@ -133,6 +137,7 @@ class HardPlanner(LocalPlanner):
                 rc[2], u_n = support_body_target_W(
                     self.robot, self.terrain, feet, rc, self.com_height_m(), u_f, u_n
                 )
+                rc = self.sunk_target(state, leg, rc, tau, target_W, u_f)
             return rc, u_f, u_n
 
         lo, hi = SCAN_STRIDES
@@ -193,54 +198,24 @@ class HardPlanner(LocalPlanner):
             return last, None
         return good
 
-    def hard_step(self, state: State, leg: int, tau: Trajectory, stride_m: float) -> Step:
-        """One step of section 8.1: Omega_1 body move, then Theta3 placement.
+    def body_move(self, state: State, leg: int, tau: Trajectory, swing_target_W=None,
+                  shrink: float | None = None, hint: State | None = None):  # fmt: skip
+        """Omega_1's body move onto the three legs other than ``leg``: (solution, samples).
 
-        When Lambda_t's foothold fails, up to ``OTHER_FOOTHOLDS`` others of the leg's
-        reachable, safe region are tried, as in the soft planner (issue 15 item 3).
+        Replaces the soft planner's Theta2 in :meth:`LocalPlanner.step`, so a step of 8.1
+        has the soft planner's footholds (Lambda_t's, then the others of the leg's safe
+        region), its back-off (body targets lowered where a leg is stretched) and the
+        paper's plain pose (no swing-ready constraint) when the foothold's fails.
+        ``shrink`` and ``hint`` (Lambda_c's and Theta2's) do not apply.
         """
-        target, _ = self.foothold_target(state, leg, tau, stride_m)
-        first = self._hard_step_to(state, leg, tau, stride_m, target)
-        if first.ok:
-            return first
-        for other in self.other_footholds(state, leg, tau, target):
-            step = self._hard_step_to(state, leg, tau, stride_m, other)
-            if step.ok:
-                return step
-        return first
-
-    def _hard_step_to(self, state: State, leg: int, tau: Trajectory, stride_m: float, target):
-        """Omega_1 body move ready for the foothold ``target``, then Theta3 placement."""
-        found, lam = self.search_body(state, leg, tau, stride_m, target)
+        found, lam = self.search_body(state, leg, tau, self.stride_m(), swing_target_W)
         if lam is None:
-            why = found.diagnosis if found is not None else "no probe"
-            return Step(leg, False, state, None, None, [], [], "body_move", f"Omega_1: {why}")
-        sol, body_path = found
-        moved = self.path_end(body_path, sol.state.support)
-        sol3, swing_path = self.swing(moved, leg, tau, stride_m, target)
-        if not sol3.feasible:
-            return Step(
-                leg, False, state, moved, None, body_path, [], "foot_placement", sol3.diagnosis
-            )
-        return Step(leg, True, state, moved, sol3.state, body_path, swing_path)
-
-    def _run(self, walk: Walk, run: _Run) -> str:
-        sequence = list(self.settings.gait)
-        fails_in_row = 0
-        k = 0
-        while not (message := self.stop_reason(walk, run, fails_in_row)):
-            run.cycles += 1
-            leg = sequence[k % len(sequence)]
-            k += 1
-            step = self.hard_step(walk.state, leg, run.tau, self.stride_m())
-            walk.add(step)
-            if step.ok:
-                fails_in_row = 0
-                self.report(walk, run)
-            else:
-                self.failed(run, step)
-                fails_in_row += 1
-        return message
+            sol = found
+            sol.diagnosis = f"Omega_1: {sol.diagnosis}"
+            return sol, []
+        sol, path = found
+        sol.state = self.path_end(path, sol.state.support)
+        return sol, path
 
 
 __all__ = ["HardPlanner"]

@@ -36,6 +36,7 @@ class SoftPlanner(LocalPlanner):
     """The gait-queue driver of section 8.2 for one robot on one terrain."""
 
     name = "soft"
+    fixed_sequence = False  # True: a failed leg waits a whole cycle (8.1's sequence S)
 
     def __init__(self, robot, terrain, mu=None, settings=None):
         super().__init__(robot, terrain, mu, settings)
@@ -83,7 +84,10 @@ class SoftPlanner(LocalPlanner):
                 if step.phase == "foot_placement":
                     step_scale[leg] = max(step_scale[leg] * 0.5, st.min_step_fraction)
                 fails_in_row += 1
-                queue.swap(leg, fails_in_row)
+                if self.fixed_sequence:
+                    queue.push(leg)
+                else:
+                    queue.swap(leg, fails_in_row)
                 continue
             history.append((mark, before, run.cycles))
             step_scale[leg] = 1.0
