@@ -250,6 +250,31 @@ def test_recursive_planner_traces_back_where_soft_gets_stuck(littledog):
     assert _max_sliding(littledog, terrain, plan.samples) < 1e-6
 
 
+def test_recursive_planner_tries_every_leg_before_it_stops(littledog):
+    """From the start the queue's first two legs (HL, FL) cannot step: a window over them
+    finds nothing, so F is run once more over every leg (HR steps) instead of "stuck"."""
+    from planner.local.recursive import RecursivePlanner
+
+    rec = RecursivePlanner(littledog, load_terrain("flat"))
+    real = rec.step
+    first = {"steps": 0}
+
+    def step(state, leg, tau, step_m, shrink=None):
+        if first["steps"] == 0 and leg in (2, 0):  # HL, FL: not before another leg moved
+            out = real(state, leg, tau, step_m, shrink)
+            out.ok, out.end, out.phase, out.diagnosis = False, None, "body_move", "blocked"
+            out.moved, out.body_path = None, []
+            return out
+        out = real(state, leg, tau, step_m, shrink)
+        first["steps"] += int(out.ok)
+        return out
+
+    rec.step = step
+    plan = rec.plan([0.2, 0.0], [0.3, 0.0])
+    assert plan.reached_goal, plan.message
+    assert plan.stats["all_legs_windows"] == 1
+
+
 def test_ctrl_c_keeps_the_plan_so_far(littledog, monkeypatch):
     from planner.validate import check_plan
     from planner.walk import plan_walk

@@ -1257,12 +1257,17 @@ class LocalPlanner:
             return f"stuck: {fails_in_row} failed step attempts in a row; last: {run.last_failure}"
         if dist < run.best_dist_m - PROGRESS_M:
             run.best_dist_m, run.best_at = dist, run.cycles
-        if run.cycles - run.best_at >= st.no_progress_cycles:
+        patience = st.no_progress_cycles * self.attempts_per_cycle()
+        if run.cycles - run.best_at >= patience:
             return (
-                f"stuck: no progress in {st.no_progress_cycles} cycles (the COM came no nearer "
+                f"stuck: no progress in {patience} cycles (the COM came no nearer "
                 f"than {100 * run.best_dist_m:.0f} cm to the goal); last: {run.last_failure}"
             )
         return ""
+
+    def attempts_per_cycle(self) -> int:
+        """Step attempts (``run.cycles``) that count as one cycle of the no-progress stop."""
+        return 1
 
     def failed(self, run: _Run, step: Step) -> None:
         """Log a failed step (kept in the plan's stats)."""

@@ -15,7 +15,14 @@ cannot be made, go back as far as needed and try the earlier steps differently. 
 - the walk is planned in windows of ``lookahead`` steps (receding horizon). Each window
   has a budget of step attempts (``node_budget``), and the whole run the time budget of
   the settings, so F always returns. A window that fails within its budget commits the
-  deepest sequence of steps it found; none at all means the robot is stuck;
+  deepest sequence of steps it found; when it found none with the first
+  ``legs_per_level`` legs of the queue it is searched once more with every leg; none at
+  all then traces back across windows: the last committed one is planned again with its
+  most cautious moves first (at most ``MAX_WINDOW_RETRACES`` times a run), and only then
+  is the robot stuck;
+- a window may take up to ``node_budget`` attempts for its ``lookahead`` steps, so an
+  attempt counts as a fraction of a cycle in the no-progress stop
+  (``no_progress_cycles`` x node_budget / lookahead attempts);
 - a window is complete only where every leg can still shift the body onto the other three
   (:meth:`planner.local.base.LocalPlanner.legs_can_move`, a plain Theta2 each): a
   sequence ending in a *dead end* is traced back like a failed step. Up a 10 cm step
@@ -32,11 +39,12 @@ tries them shorter or with a more cautious body move.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from planner.local.base import LocalPlanner, Step, Walk, _Run
 
 AMBITIONS = ((1.0, None), (0.6, None), (0.3, 0.6))  # (rho_3 stride fraction, rho_2 shrink)
+MAX_WINDOW_RETRACES = 4  # committed windows planned again when no step is left, per run
 
 
 @dataclass
@@ -71,7 +79,10 @@ class RecursivePlanner(LocalPlanner):
     def __init__(self, robot, terrain, mu=None, settings=None, recursion=None):
         super().__init__(robot, terrain, mu, settings)
         self.recursion = recursion or RecursiveSettings()
-        self.extra_stats = {"backtracks": 0, "dead_ends": 0, "windows": 0, "partial_windows": 0}
+        self.extra_stats = {
+            "backtracks": 0, "dead_ends": 0, "windows": 0, "partial_windows": 0,
+            "all_legs_windows": 0, "window_retraces": 0,
+        }  # fmt: skip
 
     def F(self, walk: Walk, queue: tuple[int, ...], n: int, run: _Run, win: _Window, path):
         """Make ``n`` steps from ``walk.state``; returns the queue after them, or None.
@@ -116,30 +127,63 @@ class RecursivePlanner(LocalPlanner):
                 win.backtracks += 1
         return None
 
+    def attempts_per_cycle(self) -> int:
+        """A window's ``node_budget`` attempts make its ``lookahead`` steps (see above)."""
+        rs = self.recursion
+        return max(1, rs.node_budget // max(1, rs.lookahead))
+
+    def _search(self, walk: Walk, queue: tuple[int, ...], run: _Run, rs: RecursiveSettings):
+        """One window of F under the budgets ``rs``: (queue after it or None, the window)."""
+        win = _Window()
+        saved, self.recursion = self.recursion, rs
+        try:
+            out = self.F(walk, queue, rs.lookahead, run, win, [])
+        except _Budget:
+            out = None
+        finally:
+            self.recursion = saved
+        self.extra_stats["backtracks"] += win.backtracks
+        self.extra_stats["dead_ends"] += win.dead_ends
+        return out, win
+
     def _run(self, walk: Walk, run: _Run) -> str:
         queue = tuple(self.settings.gait)
+        committed: list[tuple[tuple, tuple[int, ...]]] = []  # (mark, queue) before each window
+        cautious = False
         while not (message := self.stop_reason(walk, run)):
             self.extra_stats["windows"] += 1
-            win = _Window()
             root = walk.mark()
-            try:
-                out = self.F(walk, queue, self.recursion.lookahead, run, win, [])
-            except _Budget:
-                out = None
-            self.extra_stats["backtracks"] += win.backtracks
-            self.extra_stats["dead_ends"] += win.dead_ends
+            rs = self.recursion
+            if cautious:  # a window planned again: its most cautious moves first
+                rs = replace(rs, ambitions=tuple(reversed(rs.ambitions)))
+                cautious = False
+            out, win = self._search(walk, queue, run, rs)
+            if out is None and not win.best and rs.legs_per_level < len(queue):
+                # not one step with the first legs of the queue: every leg before giving up
+                self.extra_stats["all_legs_windows"] += 1
+                out, win = self._search(walk, queue, run, replace(rs, legs_per_level=len(queue)))
             if out is not None:
+                committed.append((root, queue))
                 queue = out
                 self.report(walk, run)
                 continue
             # no full window: commit the deepest sequence found, if any
             walk.rewind(root)
             if not win.best:
+                if committed and self.extra_stats["window_retraces"] < MAX_WINDOW_RETRACES:
+                    # trace back across windows (8.5: as far back as needed): the last
+                    # committed window is planned again, its most cautious moves first
+                    self.extra_stats["window_retraces"] += 1
+                    root, queue = committed.pop()
+                    walk.rewind(root)
+                    cautious = True
+                    continue
                 return (
                     f"stuck: no step possible from here with any leg or ambition; last: "
                     f"{run.last_failure}"
                 )
             self.extra_stats["partial_windows"] += 1
+            committed.append((root, queue))
             for step in win.best:
                 walk.add(step)
             queue = win.best_queue
