@@ -275,6 +275,31 @@ def test_recursive_planner_tries_every_leg_before_it_stops(littledog):
     assert plan.stats["all_legs_windows"] == 1
 
 
+def test_a_failed_body_move_is_not_solved_again(littledog):
+    """The same step asked again from the same state (8.5's ambitions) reuses the failed
+    body moves of the first attempt instead of solving them again."""
+    planner = SoftPlanner(littledog, load_terrain("flat"))
+    tau = Trajectory.straight([0.2, 0.0], [1.0, 0.0], planner.terrain, planner.com_height_m())
+    state = planner.initial_state([0.2, 0.0], tau)
+    calls = []
+    real = planner.body_move
+
+    def blocked(state, leg, tau, target=None, shrink=None, hint=None):
+        calls.append(target)
+        sol, _ = real(state, leg, tau, target, shrink, hint)
+        sol.feasible, sol.diagnosis = False, "blocked"
+        return sol, []
+
+    planner.body_move = blocked
+    first = planner.step(state, 0, tau, planner.stride_m())
+    solved = len(calls)
+    again = planner.step(state, 0, tau, planner.stride_m())
+    assert not first.ok and not again.ok and again.diagnosis == first.diagnosis
+    assert solved >= 2 and len(calls) == solved
+    other = planner.step(state, 1, tau, planner.stride_m())  # another leg: solved anew
+    assert not other.ok and len(calls) > solved
+
+
 def test_ctrl_c_keeps_the_plan_so_far(littledog, monkeypatch):
     from planner.validate import check_plan
     from planner.walk import plan_walk

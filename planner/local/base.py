@@ -81,6 +81,7 @@ KNEE_CHOICE_EDGE_M = 0.06  # ... next to an edge this much higher than the footh
 KNEE_CHOICE_LOOKAHEAD = 0.5  # fraction of a stride the body is moved ahead to judge it
 KNEE_CHOICE_FOOT_ZONE_M = 0.03  # (link points this near the foot centre do not count)
 OTHER_FOOTHOLDS = 8  # footholds tried when the body cannot get ready for Lambda_t's
+FAILED_MOVES_KEPT = 4096  # failed body moves remembered in a run (LocalPlanner._body_move_once)
 CANDIDATE_POOL = 40  # candidates scored before the best and the shortest are picked
 CANDIDATE_LATERAL_M = 0.05  # other footholds within this of the failed one sideways [m]
 DEAD_END_LATERAL_M = 0.08  # ... of the nominal placement, when the foothold is a dead end
@@ -270,6 +271,7 @@ class LocalPlanner:
         self._theta2: dict[tuple[tuple[int, ...], bool], Theta2] = {}
         self._theta3: dict[int, Theta3] = {}
         self._via_theta1: dict[tuple[int, ...], Theta1] = {}
+        self._failed_moves: dict[tuple, object] = {}  # body moves that failed (this run)
         self.stats = {
             "theta1": [0, 0],
             "theta2": [0, 0],
@@ -1056,10 +1058,10 @@ class LocalPlanner:
         while k < len(order):
             target = order[k]
             hint = body_hint if k == 0 else None
-            sol2, body_path = self.body_move(state, leg, tau, target, shrink, hint)
+            sol2, body_path = self._body_move_once(state, leg, tau, target, shrink, hint)
             if k == 0 and not sol2.feasible:
                 # the paper's plain Theta2 (no swing-ready pose) for the first foothold
-                sol2, body_path = self.body_move(state, leg, tau, None, shrink, hint)
+                sol2, body_path = self._body_move_once(state, leg, tau, None, shrink, hint)
             if not sol2.feasible:
                 step = Step(leg, False, state, None, None, [], [], "body_move", sol2.diagnosis)
             else:
@@ -1092,6 +1094,33 @@ class LocalPlanner:
                 extended = True
             k += 1
         return dead_end or first
+
+    def _body_move_once(self, state: State, leg: int, tau: Trajectory, target, shrink, hint):
+        """:meth:`body_move`, remembering its failures for this run.
+
+        A body move is a deterministic function of its inputs (Theta2 starts from the
+        state, not from its last solve), and the recursive planner (8.5) asks for the same
+        failing one again with every ambition that keeps the body target (the plain pose
+        of the first foothold, the other footholds): barrier9cm spent 2-3 s per repeat.
+        """
+        arrays = [state.base_position_W, state.base_quaternion_xyzw, state.joints_rad,
+                  state.feet_W]  # fmt: skip
+        if target is not None:
+            arrays.append(np.asarray(target, float))
+        if hint is not None:
+            arrays += [hint.base_position_W, hint.base_quaternion_xyzw, hint.joints_rad]
+        key = (leg, target is None, hint is None, shrink, self._sink, id(tau)) + tuple(
+            np.ascontiguousarray(a, float).tobytes() for a in arrays
+        )
+        failed = self._failed_moves.get(key)
+        if failed is not None:
+            return failed, []
+        sol, path = self.body_move(state, leg, tau, target, shrink, hint)
+        if not sol.feasible:
+            if len(self._failed_moves) >= FAILED_MOVES_KEPT:
+                self._failed_moves.clear()
+            self._failed_moves[key] = sol
+        return sol, path
 
     def next_leg_can_move(self, state: State, leg: int, tau: Trajectory, shrink=None) -> bool:
         """Whether the gait's next leg finds a body move (plain Theta2) after ``leg``'s step.
@@ -1149,6 +1178,7 @@ class LocalPlanner:
         so far (its message says so).
         """
         t_begin = time.perf_counter()
+        self._failed_moves.clear()  # keyed by tau's id, which a new run may reuse
         if tau is None:
             tau = Trajectory.straight(start_xy, goal_xy, self.terrain, self.com_height_m())
         state = start_state if start_state is not None else self.initial_state(start_xy, tau)
