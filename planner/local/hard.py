@@ -145,8 +145,9 @@ class HardPlanner(SoftPlanner):
         offsets = np.linspace(lo, hi, count) * stride_m
         window = sorted({float(tau.clip(lam_now + f)) for f in offsets})
         held, why = [], ""
+        screened = {lam: targets(lam) for lam in window}
         for lam in reversed(window):  # farthest first
-            ok, why_not = problem.force_precheck(state, targets(lam)[0])
+            ok, why_not = problem.force_precheck(state, screened[lam][0])
             if ok:
                 held.append(lam)
             elif not why:
@@ -159,7 +160,7 @@ class HardPlanner(SoftPlanner):
         def solve(lam: float):
             """(solution, body path) at ``lam``, or None (``last`` says why)."""
             nonlocal last
-            rc, u_f, u_n = targets(lam)
+            rc, u_f, u_n = screened[lam]
             sol = problem.solve(state, rc, u_f, u_n, target_W)
             self._count("theta1", sol.feasible)
             if sol.feasible and not self.holds_on_three(sol.state, leg):

@@ -63,6 +63,7 @@ class _Budget(Exception):
 
 @dataclass
 class _Window:
+    rs: RecursiveSettings = field(default_factory=RecursiveSettings)  # its budgets
     attempts: int = 0
     best: list[Step] = field(default_factory=list)
     best_queue: tuple[int, ...] = ()
@@ -99,7 +100,7 @@ class RecursivePlanner(LocalPlanner):
                 return queue
             win.dead_ends += 1
             return None
-        rs = self.recursion
+        rs = win.rs
         for j in range(min(rs.legs_per_level, len(queue))):
             leg = queue[j]
             rest = queue[:j] + queue[j + 1 :] + (leg,)
@@ -134,14 +135,11 @@ class RecursivePlanner(LocalPlanner):
 
     def _search(self, walk: Walk, queue: tuple[int, ...], run: _Run, rs: RecursiveSettings):
         """One window of F under the budgets ``rs``: (queue after it or None, the window)."""
-        win = _Window()
-        saved, self.recursion = self.recursion, rs
+        win = _Window(rs)
         try:
             out = self.F(walk, queue, rs.lookahead, run, win, [])
         except _Budget:
             out = None
-        finally:
-            self.recursion = saved
         self.extra_stats["backtracks"] += win.backtracks
         self.extra_stats["dead_ends"] += win.dead_ends
         return out, win

@@ -96,6 +96,7 @@ class Theta2(ThetaProblem):
 
     name = "Theta2"
     fix_com = False
+    height_band_m = 0.0  # Theta1's band for the pinned COM's height (0: pinned in 3-D)
 
     def __init__(
         self,
@@ -150,7 +151,7 @@ class Theta2(ThetaProblem):
         self.constrain_body_pose(pos, R, phi, s1, s2, u_f, u_n)
         self.constrain_leg_links(pos, R, {i: th[3 * i : 3 * i + 3] for i in range(4)})
         com = com_W_ca(self, pos, R, th)
-        band = float(getattr(self, "height_band_m", 0.0))
+        band = self.height_band_m
         free_height = self.fix_com and band > 0.0
         if free_height:  # Theta1 with the COM pinned over r_c*, its height within a band
             self.constrain("com", com[0:2] - rc[0:2])
@@ -622,7 +623,7 @@ class Theta2(ThetaProblem):
                         state.feet_W[list(self.support)], ck.com_W(landed)
                     )
                     v["balance_margin_landing"] = max(need - have, 0.0)
-        band = float(getattr(self, "height_band_m", 0.0))
+        band = self.height_band_m
         if self.fix_com:
             off = ck.com_W(state) - p[self._p_slices["rc_star"]]
             if band > 0.0:  # horizontal pin, height within the band
