@@ -110,13 +110,23 @@ def _rest(terrain: TerrainLike, c: _Array, n_dir: _Array, rho: float) -> tuple[_
     for _ in range(REST_ITERATIONS):
         n = np.asarray(terrain.normal(r), float).reshape(-1, 3)
         r = c - rho * n
-        n = np.asarray(terrain.normal(r), float).reshape(-1, 3)
-        gap = np.asarray(terrain.f_T(r), float).reshape(-1) * n[:, 2]  # > 0: above resting
+        f, n = _f_T_and_normal(terrain, r)
+        gap = f * n[:, 2]  # > 0: above resting
         c = c - (gap / np.maximum(np.sum(n * n_dir, axis=1), 0.5))[:, None] * n_dir
         r = c - rho * n
         if float(np.max(np.abs(gap))) < 1e-12:
             break
     return c, r
+
+
+def _f_T_and_normal(terrain: TerrainLike, r: _Array) -> tuple[_Array, _Array]:
+    """(f_T (N,), normals (N, 3)) at points r, in one terrain pass where the terrain has it."""
+    both = getattr(terrain, "f_T_and_normal", None)
+    if both is not None:
+        f, n = both(r)
+    else:
+        f, n = terrain.f_T(r), terrain.normal(r)
+    return np.asarray(f, float).reshape(-1), np.asarray(n, float).reshape(-1, 3)
 
 
 def roll_stance_feet(

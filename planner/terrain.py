@@ -1158,6 +1158,12 @@ class Terrain:
         xa, ya = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
         shape = xa.shape
         xf, yf = xa.reshape(-1), ya.reshape(-1)
+        if 0 < xf.size <= _CHUNK:  # one chunk
+            part = fn(xf, yf)
+            return [
+                np.array(np.broadcast_to(o, xf.shape), dtype=float).reshape(shape)
+                for o in (part if n_out > 1 else (part,))
+            ]
         outs = [np.empty(xf.size) for _ in range(n_out)]
         for i in range(0, xf.size, _CHUNK):
             part = fn(xf[i : i + _CHUNK], yf[i : i + _CHUNK])
@@ -1214,6 +1220,26 @@ class Terrain:
 
         gx, gy = self._apply(fn, x, y, 2)
         return gx, gy
+
+    def f_T_and_normal(self, p_W: Any) -> tuple[np.ndarray, np.ndarray]:
+        """(:meth:`f_T`, :meth:`normal`) at points (..., 3) in one pass over the segments.
+
+        The same numbers as the two calls; a sphere put to rest on the terrain
+        (:mod:`planner.rolling`) asks both at the same points thousands of times a walk.
+        """
+        p = np.asarray(p_W, dtype=float)
+
+        def fn(xf: np.ndarray, yf: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            z, gx, gy = np.zeros(xf.shape), np.zeros(xf.shape), np.zeros(xf.shape)
+            for off, k in self._segments:
+                z = z + k.value_np(xf - off, yf)
+                a, b = k.grad_np(xf - off, yf)
+                gx, gy = gx + a, gy + b
+            return z, gx, gy
+
+        z, gx, gy = self._apply(fn, p[..., 0], p[..., 1], 3)
+        g = np.stack([-gx, -gy, np.ones_like(gx)], axis=-1)
+        return p[..., 2] - z, g / np.linalg.norm(g, axis=-1, keepdims=True)
 
     def f_T(self, p_W: Any) -> float | np.ndarray:
         """Implicit terrain function p_z - z_T(p_x, p_y) at points (..., 3), world frame, metres."""

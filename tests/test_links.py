@@ -94,6 +94,32 @@ def test_path_margin_of_some_legs_is_theirs_and_leaves_the_others(littledog, rng
     assert near > 0  # some capsule within its margin: the Euclidean fallback ran
 
 
+def test_path_margins_of_a_path_are_each_configurations_own(littledog, rng):
+    """One batched call over a path (issue 16) gives every configuration the margins of
+    its own call, with its own swing legs and scale, near an edge too (witnesses)."""
+    terrain = _course("barrier", x=0.8, height=0.075, thickness=0.03)
+    links = leg_links(littledog)
+    qs, swings = [], []
+    for _ in range(12):
+        joints = littledog.theta_nor + rng.normal(scale=0.3, size=(4, 3))
+        base = np.array([rng.uniform(0.7, 0.9), rng.uniform(-0.05, 0.05), rng.uniform(0.1, 0.2)])
+        qs.append(littledog.q_from(base, [0, 0, 0, 1], joints))
+        swings.append(list(rng.choice(4, size=rng.integers(0, 2), replace=False)))
+    short, bare = links.path_margins(terrain, qs, swings, scales=(1.0, 0.0))
+    for k, (q, sw) in enumerate(zip(qs, swings, strict=True)):
+        np.testing.assert_allclose(short[k], links.path_margin(terrain, q, sw), atol=1e-15)
+        np.testing.assert_allclose(
+            bare[k], links.path_margin(terrain, q, sw, scale=0.0), atol=1e-15
+        )
+        # against the exact distance (validator, 0.5 mm grid): a link through the terrain
+        # has a negative margin, one with a positive margin is not through it
+        exact = sharp_surface_distance(terrain, links.axis_points_W(q), 0.05, step_m=5e-4)
+        clear = np.array([(exact - links.radius)[links.owner == c].min() for c in range(8)])
+        assert np.all(bare[k][clear < -1e-3] < 0.0)
+        assert np.all(clear[bare[k] > 1e-3] > -1e-3)
+    assert np.any(short < 0.0) and np.any(short > 0.0)  # witnesses ran, and clear links
+
+
 def test_the_shank_end_inside_the_foot_sphere_is_cut(rng):
     """What is cut lies inside the foot sphere; the new end's ball touches it from inside."""
     from planner.links import _outside_sphere

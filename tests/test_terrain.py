@@ -154,6 +154,16 @@ def test_numpy_and_casadi_agree(name, t):
 
 
 @pytest.mark.parametrize(("name", "t"), ALL, ids=IDS)
+def test_f_T_and_normal_in_one_pass_are_the_two_calls(name, t):
+    p = _random_points(t, 50, seed=4)
+    f, n = t.f_T_and_normal(p)
+    np.testing.assert_array_equal(f, t.f_T(p))
+    np.testing.assert_array_equal(n, t.normal(p))
+    f1, n1 = t.f_T_and_normal(p[7])  # one point, as (3,)
+    assert float(f1) == t.f_T(p[7]) and n1.shape == (3,)
+
+
+@pytest.mark.parametrize(("name", "t"), ALL, ids=IDS)
 def test_gradients_match_finite_differences(name, t):
     p = _random_points(t, 40, seed=2)
     gx_fd, gy_fd = _fd_height_grad(t, p[:, 0], p[:, 1])

@@ -806,12 +806,11 @@ class LocalPlanner:
                 return f"sample {k} of the path leaves the reach of {legs or 'a leg'}"
             miss = 0.0
         pts_B = self._bottom_B
-        body_floor = BODY_CLEARANCE_M
-        for k, s in enumerate(path):
-            pts = pts_B @ s.base_rotation_W.T + s.base_position_W
-            gap = pts[:, 2] - np.asarray(self.terrain.height_sharp(pts[:, 0], pts[:, 1]))
-            if k == 0:  # a measured start may lack the margin: the path must not lose more
-                body_floor = max(min(BODY_CLEARANCE_M, float(gap.min()) - START_SLACK_M), 0.0)
+        pts = np.array([pts_B @ s.base_rotation_W.T + s.base_position_W for s in path])
+        gaps = pts[..., 2] - np.asarray(self.terrain.height_sharp(pts[..., 0], pts[..., 1]))
+        # a measured start may lack the margin: the path must not lose more
+        body_floor = max(min(BODY_CLEARANCE_M, float(gaps[0].min()) - START_SLACK_M), 0.0)
+        for k, gap in enumerate(gaps):
             if float(gap.min()) < body_floor:
                 return (
                     f"the body passes {float(gap.min()) * 1000:.1f} mm above the terrain at "
@@ -834,25 +833,19 @@ class LocalPlanner:
         qs = [
             self.robot.q_from(s.base_position_W, s.base_quaternion_xyzw, s.joints_rad) for s in path
         ]
-        floor = None
-        for k, (s, q) in enumerate(zip(path, qs, strict=True)):
-            swing = [i for i in range(4) if not s.in_contact[i]]
-            short = links.path_margin(self.terrain, q, swing)
-            if floor is None:  # as for the body: not below what the start already has
-                floor = np.minimum(short - START_SLACK_M, 0.0)
+        swings = [[i for i in range(4) if not s.in_contact[i]] for s in path]
+        shorts, bares = links.path_margins(self.terrain, qs, swings, scales=(1.0, 0.0))
+        # as for the body: not below what the start already has; nor touching deeper
+        floor = np.minimum(shorts[0] - START_SLACK_M, 0.0)
+        bare_floor = np.minimum(bares[0] - START_SLACK_M, 0.0)
+        for k, (short, bare) in enumerate(zip(shorts, bares, strict=True)):
             c = int(np.argmin(short - floor))
             if short[c] < floor[c]:
                 return (
                     f"the {links.describe(c)} comes {-short[c] * 1000:.1f} mm nearer the terrain "
                     f"than its path margin at sample {k} of the path"
                 )
-            bare = None
-            if k == 0:  # a measured start may touch already: no deeper
-                bare = links.path_margin(self.terrain, q, swing, scale=0.0)
-                bare_floor = np.minimum(bare - START_SLACK_M, 0.0)
             if short.min() < 0.0:  # inside the margin, as the measured start: not touching
-                if bare is None:
-                    bare = links.path_margin(self.terrain, q, swing, scale=0.0)
                 c = int(np.argmin(bare - bare_floor))
                 if bare[c] < bare_floor[c]:
                     return f"the {links.describe(c)} touches the terrain at sample {k} of the path"
@@ -942,15 +935,15 @@ class LocalPlanner:
             # a leg moving less than one sweep step is within it of its ends (a stance leg
             # beside a swing does not move at all): only the others are swept
             legs = np.flatnonzero(leg_jump > BETWEEN_STEP_RAD)
-            ends = np.minimum(
-                links.path_margin(self.terrain, qs[k], swing, scale=0.0, legs=legs),
-                links.path_margin(self.terrain, qs[k + 1], swing, scale=0.0, legs=legs),
-            )
-            floor = np.minimum(ends, 0.0) - START_SLACK_M
             m = int(np.ceil(jump / BETWEEN_STEP_RAD))
-            for u in np.arange(1, m) / m:
-                q = between_q(qs[k], qs[k + 1], u)
-                bare = links.path_margin(self.terrain, q, swing, scale=0.0, legs=legs)
+            sweep = [qs[k], qs[k + 1]] + [
+                between_q(qs[k], qs[k + 1], u) for u in np.arange(1, m) / m
+            ]
+            bares = links.path_margins(
+                self.terrain, sweep, [swing] * len(sweep), scales=(0.0,), legs=legs
+            )[0]
+            floor = np.minimum(np.minimum(bares[0], bares[1]), 0.0) - START_SLACK_M
+            for bare in bares[2:]:
                 c = int(np.argmin(bare - floor))
                 if bare[c] < floor[c]:
                     return (

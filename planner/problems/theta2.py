@@ -434,7 +434,7 @@ class Theta2(ThetaProblem):
         centres = p[self._p_slices["centres_W"]].reshape(4, 3)
         for frac in (1.0, 0.5, 0.0):
             pos = start.base_position_W + frac * (target - start.base_position_W)
-            legs = self.kin.ik(pos, R, centres, start.joints_rad)
+            legs = self.kin.ik(pos, R, centres, start.joints_rad, closest=False)
             if all(r.reachable and not r.knee_flipped for r in legs):
                 return pos, np.array([r.joints_rad for r in legs])
         return start.base_position_W, start.joints_rad
