@@ -1,6 +1,6 @@
 """Up a 10 cm step (issue 13's must-show, 55 % of LittleDog's leg): the recursive planner
-(8.5) with its window check plans it, the plan passes the independent check (leg links,
-torques) and holds up in MuJoCo open loop at its own timing."""
+(8.5), where the soft planner stalls 0.9 m in, plans it, the plan passes the independent
+check (leg links, torques) and holds up in MuJoCo open loop at its own timing."""
 
 import numpy as np
 import pytest
@@ -27,8 +27,6 @@ def test_recursive_plans_up_a_10cm_step(climb):
     assert again.ok and not again.violations
     feet = np.array(plan.keyframes[-1].feet)
     assert np.all(feet[:, 2] > 0.099)  # all four feet on top of the step
-    # the window check traced back at least one sequence into a dead end
-    assert plan.stats["dead_ends"] >= 1 and plan.stats["backtracks"] >= 1
 
 
 def test_the_climb_holds_up_in_mujoco_open_loop(climb):

@@ -23,12 +23,14 @@ cannot be made, go back as far as needed and try the earlier steps differently. 
 - a window may take up to ``node_budget`` attempts for its ``lookahead`` steps, so an
   attempt counts as a fraction of a cycle in the no-progress stop
   (``no_progress_cycles`` x node_budget / lookahead attempts);
-- a window is complete only where every leg can still shift the body onto the other three
-  (:meth:`planner.local.base.LocalPlanner.legs_can_move`, a plain Theta2 each): a
-  sequence ending in a *dead end* is traced back like a failed step. Up a 10 cm step
-  the greedy order puts three feet on top while the fourth, below, can no longer reach
-  with the COM over the other three; the window check finds the order that brings it
-  up in time (``stats.dead_ends`` counts the windows refused).
+- a window is complete only where the queue's next leg can still shift the body onto the
+  other three (:meth:`planner.local.base.LocalPlanner.legs_can_move`, a plain Theta2): a
+  sequence ending in a *dead end* is traced back like a failed step (``stats.dead_ends``
+  counts the windows refused). Each step already looks one leg ahead when it picks its
+  foothold (:meth:`~planner.local.base.LocalPlanner.next_leg_can_move`). Asking it of
+  every leg (``check_all_legs``) refused sound windows: stairs with every leg checked
+  traced back 15 windows of 15 and stopped by its 240 s budget 0.6 m short; with the
+  next leg it reaches in 29 s, and up step10cm in 39 s instead of 110 s.
 
 Where it beats 8.2: the soft planner commits every step greedily and, when a leg then
 cannot step, only swaps legs and shortens that one leg's stride; the recursive planner
@@ -55,6 +57,7 @@ class RecursiveSettings:
     node_budget: int = 24
     legs_per_level: int = 2
     ambitions: tuple = AMBITIONS
+    check_all_legs: bool = False  # a window's end: every leg can move, not only the next
 
 
 class _Budget(Exception):
@@ -93,10 +96,10 @@ class RecursivePlanner(LocalPlanner):
         if self.distance_to_goal(walk.state, run) <= self.settings.goal_tol_m:
             return queue
         if n == 0:
-            # a window ends where every leg can still shift the body onto the other three:
-            # otherwise it leads into a dead end (three feet up a step, the fourth unable
-            # to follow) and is traced back like a failed step
-            if self.legs_can_move(walk.state, queue, run.tau):
+            # a window ends where the next leg can still shift the body onto the other
+            # three: otherwise it leads into a dead end and is traced back like a failed step
+            legs = queue if win.rs.check_all_legs else queue[:1]
+            if self.legs_can_move(walk.state, legs, run.tau):
                 return queue
             win.dead_ends += 1
             return None
