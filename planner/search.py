@@ -5,12 +5,16 @@ persuasion Theta1(R_tau(lambda), ...) is feasible on the current leaf of S0. Fea
 along lambda is, in practice, an interval starting at the body's current lambda (the COM
 can move forward until a leg runs out of reach or the COM leaves the support), so the
 paper searches it by bisection: each probe is one Theta1 solve, warm-started from the
-last feasible configuration.
+last feasible configuration. :func:`omega` bisects the interval itself;
+:func:`farthest_feasible` bisects a list of screened lambdas (the hard planner's, whose
+targets are checked without a solve first, :mod:`planner.local.hard`).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -109,3 +113,32 @@ def omega(
             hi = mid
     out.xi.sort(key=lambda pair: pair[1])
     return out
+
+
+def farthest_feasible(
+    lams: Sequence[float], solve: Callable[[float], Any], max_solves: int
+) -> tuple[Any, float | None]:
+    """Omega (eq. 11) over candidate lambdas, farthest first: (solve's result, lambda).
+
+    ``solve(lam)`` returns a result, or None where the problem is infeasible. The
+    farthest candidate is solved first; where it fails, feasibility is taken as an
+    interval of lambdas up to some point and bisected over the nearer candidates for the
+    farthest feasible one, ``max_solves`` solves in all. (None, None) when none is found.
+    """
+    if not lams or max_solves < 1:
+        return None, None
+    first = solve(lams[0])
+    if first is not None:
+        return first, lams[0]
+    good: tuple[Any, float | None] = (None, None)
+    lo, hi = 1, len(lams) - 1
+    for _ in range(max_solves - 1):
+        if lo > hi:
+            break
+        k = (lo + hi) // 2
+        got = solve(lams[k])
+        if got is not None:
+            good, hi = (got, lams[k]), k - 1
+        else:
+            lo = k + 1
+    return good

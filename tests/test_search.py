@@ -49,3 +49,26 @@ def test_omega_returns_at_once_when_the_far_end_is_feasible(setup):
     dog, terrain, start, problem, tau = setup
     res = omega(problem, start, tau, 0.0, 0.005)
     assert res.solves == 1 and res.best[1] == pytest.approx(0.005)
+
+
+@pytest.mark.parametrize("edge", [0, 3, 8, 16, 31])
+def test_farthest_feasible_bisects_the_screened_lambdas(edge):
+    """Feasible up to the ``edge``-th nearest of 32 lambdas: the farthest is tried first,
+    then bisection finds the edge in 1 + log2(31) solves, never solving a lambda twice."""
+    from planner.search import farthest_feasible
+
+    lams = [0.01 * k for k in range(31, -1, -1)]  # farthest first
+    edge_lam = 0.01 * edge
+    asked = []
+
+    def solve(lam):
+        asked.append(lam)
+        return ("pose", lam) if lam <= edge_lam + 1e-12 else None
+
+    got, lam = farthest_feasible(lams, solve, max_solves=6)
+    assert lam == pytest.approx(edge_lam) and got == ("pose", lam)
+    assert len(asked) <= 6 and len(set(asked)) == len(asked)
+    none, at = farthest_feasible(lams, lambda lam: None, max_solves=6)
+    assert (none, at) == (None, None)
+    short = farthest_feasible(lams, solve, max_solves=2)  # the budget bounds the solves
+    assert short[1] is None or short[1] <= edge_lam

@@ -40,6 +40,7 @@ from planner.local.base import TORQUE_FRACTION
 from planner.local.soft import SoftPlanner
 from planner.problems import Theta1
 from planner.problems.base import ThetaSolution
+from planner.search import farthest_feasible
 from planner.stability import support_margin_m
 from planner.state import State
 from planner.trajectory import Trajectory
@@ -179,25 +180,9 @@ class HardPlanner(SoftPlanner):
             last = sol
             return None
 
-        # the farthest held lambda; else a bisection over the held list for the farthest
-        # feasible one (feasibility is taken as an interval of lambdas up to some point)
-        good = None
-        first = solve(held[0])
-        if first is not None:
-            return first, held[0]
-        lo, hi = 1, len(held) - 1
-        for _ in range(MAX_SCREENED_SOLVES - 1):
-            if lo > hi:
-                break
-            k = (lo + hi) // 2
-            sol = solve(held[k])
-            if sol is not None:
-                good, hi = (sol, held[k]), k - 1
-            else:
-                lo = k + 1
-        if good is None:
-            return last, None
-        return good
+        # the farthest held lambda; else a bisection over the held list (Omega, eq. 11)
+        found, lam = farthest_feasible(held, solve, MAX_SCREENED_SOLVES)
+        return (last, None) if lam is None else (found, lam)
 
     def body_move(self, state: State, leg: int, tau: Trajectory, swing_target_W=None,
                   shrink: float | None = None, hint: State | None = None):  # fmt: skip
