@@ -239,23 +239,26 @@ def replan_rest(robot, terrain, mu, settings, state, goal_xy, tau):
     When the precomputed plan's steps no longer fit the measured state (barrier75mm: the
     robot 1 cm off the plan's pose beside the barrier, a knee near its limit), the soft
     planner (8.2, with its look-ahead and retrace) plans from there to the goal within
-    ``REPLAN_BUDGET_S``; its steps become the guide. None when it does not reach the goal:
-    barrier9cm's two re-plans stopped after 7 and 12 steps, followed into their dead end,
-    where the gait queue's greedy steps from the measured state reach the goal.
+    ``REPLAN_BUDGET_S``; where it stalls, the recursive planner (8.5, which traces back
+    and tries shorter strides) gets the same budget. Its steps become the guide. None
+    when neither reaches the goal: barrier9cm's two re-plans stopped after 7 and 12
+    steps, followed into their dead end, where the gait queue's greedy steps from the
+    measured state reach the goal.
     """
     from dataclasses import replace
 
+    from planner.local.recursive import RecursivePlanner
     from planner.local.soft import SoftPlanner
     from planner.walk import plan_of
 
-    local = SoftPlanner(
-        robot, terrain, mu=mu, settings=replace(settings, time_budget_s=REPLAN_BUDGET_S)
-    )
+    budget = replace(settings, time_budget_s=REPLAN_BUDGET_S)
     start_xy = state.base_position_W[:2]
-    res = local.plan(start_xy, goal_xy, tau=tau, start_state=state)
-    if not res.reached_goal or res.stats["steps"] == 0:
-        return None
-    return plan_of(robot, terrain, mu, start_xy, goal_xy, res, {})
+    for kind in (SoftPlanner, RecursivePlanner):
+        local = kind(robot, terrain, mu=mu, settings=budget)
+        res = local.plan(start_xy, goal_xy, tau=tau, start_state=state)
+        if res.reached_goal and res.stats["steps"] > 0:
+            return plan_of(robot, terrain, mu, start_xy, goal_xy, res, {})
+    return None
 
 
 def plan_step_cycles(plan: Plan) -> list[tuple[int, int]] | None:

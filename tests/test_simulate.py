@@ -426,9 +426,11 @@ def test_feedback_replans_the_rest_when_the_plans_steps_fail(short_plan, monkeyp
 
 
 def test_a_replan_is_followed_only_when_it_reaches_the_goal(short_plan, monkeypatch):
-    """replan_rest plans from a given state to the goal; a re-plan that stops short (its own
-    dead end) is not returned, so feedback does not walk into it."""
+    """replan_rest plans from a given state to the goal; where the soft planner stops short
+    the recursive one is asked; a re-plan that stops short (its own dead end) is not
+    returned, so feedback does not walk into it."""
     from planner.execution import _planned_settings, replan_rest
+    from planner.local.base import LocalPlanner
     from planner.local.soft import SoftPlanner
     from planner.trajectory import Trajectory
 
@@ -440,14 +442,21 @@ def test_a_replan_is_followed_only_when_it_reaches_the_goal(short_plan, monkeypa
     new = replan_rest(robot, terrain, short_plan.friction, st, start, goal, tau)
     assert new is not None and new.outcome["reached_goal"] and len(planned_steps(new)) > 4
     np.testing.assert_allclose(new.keyframes[0].base_position, start.base_position_W)
-    real = SoftPlanner.plan
+    real = LocalPlanner.plan
+    asked = []
 
     def short(self, *args, **kw):
         res = real(self, *args, **kw)
-        res.reached_goal = False
+        asked.append(self.name)
+        res.reached_goal = res.reached_goal and self.name not in stalls
         return res
 
-    monkeypatch.setattr(SoftPlanner, "plan", short)
+    monkeypatch.setattr(LocalPlanner, "plan", short)
+    assert "plan" not in SoftPlanner.__dict__  # (both planners run LocalPlanner.plan)
+    stalls = {"soft"}
+    new = replan_rest(robot, terrain, short_plan.friction, st, start, goal, tau)
+    assert asked == ["soft", "recursive"] and new is not None and new.outcome["reached_goal"]
+    stalls = {"soft", "recursive"}
     assert replan_rest(robot, terrain, short_plan.friction, st, start, goal, tau) is None
 
 

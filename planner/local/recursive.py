@@ -40,6 +40,7 @@ tries them shorter or with a more cautious body move.
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field, replace
 
@@ -47,6 +48,8 @@ from planner.local.base import LocalPlanner, Step, Walk, _Run
 
 AMBITIONS = ((1.0, None), (0.6, None), (0.3, 0.6))  # (rho_3 stride fraction, rho_2 shrink)
 MAX_WINDOW_RETRACES = 4  # committed windows planned again when no step is left, per run
+STALLED_WINDOWS = 2  # committed windows in a row that bring the COM no nearer the goal ...
+PROGRESS_M = 0.01  # ... by this [m] are traced back, with every leg checked at their ends
 
 
 @dataclass
@@ -85,7 +88,7 @@ class RecursivePlanner(LocalPlanner):
         self.recursion = recursion or RecursiveSettings()
         self.extra_stats = {
             "backtracks": 0, "dead_ends": 0, "windows": 0, "partial_windows": 0,
-            "all_legs_windows": 0, "window_retraces": 0,
+            "all_legs_windows": 0, "window_retraces": 0, "stall_retraces": 0,
         }  # fmt: skip
 
     def F(self, walk: Walk, queue: tuple[int, ...], n: int, run: _Run, win: _Window, path):
@@ -151,6 +154,8 @@ class RecursivePlanner(LocalPlanner):
         queue = tuple(self.settings.gait)
         committed: list[tuple[tuple, tuple[int, ...]]] = []  # (mark, queue) before each window
         cautious = False
+        nearest, stalled = self.distance_to_goal(walk.state, run), 0
+        thorough_to = math.inf  # every leg checked while the COM is farther from the goal [m]
         while not (message := self.stop_reason(walk, run)):
             self.extra_stats["windows"] += 1
             root = walk.mark()
@@ -158,37 +163,54 @@ class RecursivePlanner(LocalPlanner):
             if cautious:  # a window planned again: its most cautious moves first
                 rs = replace(rs, ambitions=tuple(reversed(rs.ambitions)))
                 cautious = False
+            if self.distance_to_goal(walk.state, run) > thorough_to:
+                rs = replace(rs, check_all_legs=True)  # past a stall: every leg checked
             out, win = self._search(walk, queue, run, rs)
             if out is None and not win.best and rs.legs_per_level < len(queue):
                 # not one step with the first legs of the queue: every leg before giving up
                 self.extra_stats["all_legs_windows"] += 1
                 out, win = self._search(walk, queue, run, replace(rs, legs_per_level=len(queue)))
-            if out is not None:
-                committed.append((root, queue))
-                queue = out
-                self.report(walk, run)
-                continue
-            # no full window: commit the deepest sequence found, if any
-            walk.rewind(root)
-            if not win.best:
-                if committed and self.extra_stats["window_retraces"] < MAX_WINDOW_RETRACES:
-                    # trace back across windows (8.5: as far back as needed): the last
-                    # committed window is planned again, its most cautious moves first
-                    self.extra_stats["window_retraces"] += 1
-                    root, queue = committed.pop()
-                    walk.rewind(root)
-                    cautious = True
-                    continue
-                return (
-                    f"stuck: no step possible from here with any leg or ambition; last: "
-                    f"{run.last_failure}"
-                )
-            self.extra_stats["partial_windows"] += 1
+            if out is None:  # no full window: the deepest sequence found, if any
+                walk.rewind(root)
+                if not win.best:
+                    if committed and self.extra_stats["window_retraces"] < MAX_WINDOW_RETRACES:
+                        # trace back across windows (8.5: as far back as needed): the last
+                        # committed window is planned again, its most cautious moves first
+                        self.extra_stats["window_retraces"] += 1
+                        root, queue = committed.pop()
+                        walk.rewind(root)
+                        cautious = True
+                        continue
+                    return (
+                        f"stuck: no step possible from here with any leg or ambition; last: "
+                        f"{run.last_failure}"
+                    )
+                self.extra_stats["partial_windows"] += 1
+                for step in win.best:
+                    walk.add(step)
+                out = win.best_queue
             committed.append((root, queue))
-            for step in win.best:
-                walk.add(step)
-            queue = win.best_queue
+            queue = out
             self.report(walk, run)
+            d = self.distance_to_goal(walk.state, run)
+            nearest, stalled = (d, 0) if d < nearest - PROGRESS_M else (nearest, stalled + 1)
+            if (
+                stalled >= STALLED_WINDOWS
+                and len(committed) > stalled
+                and self.extra_stats["window_retraces"] < MAX_WINDOW_RETRACES
+            ):
+                # shuffling in place (hind legs that cannot follow the front ones over a
+                # barrier): the stalled windows and the one before are traced back (the
+                # second time: the whole walk) and planned again with every leg checked
+                # at their ends, until the COM is past where it stalled
+                self.extra_stats["window_retraces"] += 1
+                self.extra_stats["stall_retraces"] += 1
+                first = self.extra_stats["stall_retraces"] == 1
+                for _ in range(stalled + 1 if first else len(committed)):
+                    root, queue = committed.pop()
+                walk.rewind(root)
+                thorough_to = nearest - PROGRESS_M
+                nearest, stalled = self.distance_to_goal(walk.state, run), 0
         return message
 
 
