@@ -189,6 +189,10 @@ def _source(sim: Simulator, source: StateSource | None, **noise) -> StateSource:
 # (stride fraction, Lambda_c shrink) tried in turn for one step from a measured state
 BACKOFF = ((1.0, None), (0.5, 0.5), (0.25, 0.7))
 GUIDE_FAILS = 2  # failed cycles in a row after which feedback stops following the plan's steps
+# a corrected swing sample whose IK joints leave the plan's by more than this [rad] keeps
+# the plan's (step10cm's recursive plan: HR's corrected knee 66 degrees off, the foot on
+# the step edge, a fall)
+SWING_JUMP_RAD = 0.35
 REPLANS = 2  # ... and re-plans the rest of the walk from the measured state, at most so often
 REPLAN_BUDGET_S = 120.0  # planning time of one such re-plan [s] (the robot stands on four feet)
 MAX_ARRIVALS = 2  # arrival moves (four feet, COM over the goal) tried from measured states
@@ -602,6 +606,13 @@ def correct_cycle(
             res = kin.ik_leg(
                 i, R.T @ (target - p), reference_rad=ref[i], knee=kin.knee_direction(i, ref[i])
             )
+            swinging = lift[i] is not None and lift[i][0] < k < lift[i][1]
+            if swinging and float(np.max(np.abs(res.joints_rad - ref[i]))) > SWING_JUMP_RAD:
+                # IK took another solution than the plan's swing (a joint-space swing
+                # over an edge flips the knee mid-air): the plan's joints in the corrected
+                # body, the foot off by the body's correction until it lands
+                joints[i] = ref[i]
+                continue
             misses += int(not res.reachable)
             joints[i] = res.joints_rad
         out[k] = robot.q_from(p, quat_from_rotation(R) if w > 0.0 else plan_q[k, 3:7], joints)

@@ -508,3 +508,38 @@ def test_a_correction_turns_the_body_from_its_measured_attitude(short_plan):
     np.testing.assert_allclose(q[lift - 1 :, 3:7], q_plan[lift - 1 :, 3:7], atol=1e-12)
     for k in range(lift):  # the corrected joints keep the stance feet where they stand
         np.testing.assert_allclose(_foot_centres(robot, q[k]), centres[k], atol=1e-6)
+
+
+def test_a_corrected_swing_keeps_the_plans_joints_where_ik_leaves_them(short_plan, monkeypatch):
+    """8.4 re-solves a swing sample by IK; where IK answers with another solution than the
+    plan's (step10cm's recursive plan: the HR knee 66 degrees off, the foot on the step's
+    edge, a fall) the swing leg keeps the plan's joints; small corrections are IK's."""
+    from planner.execution import SWING_JUMP_RAD, correct_cycle
+    from planner.kinematics import kinematics_of
+
+    robot, s = short_plan.load_robot(), short_plan.samples
+    a, b = plan_step_cycles(short_plan)[1]
+    q_plan, contact = s.q[a : b + 1], s.contact[a : b + 1]
+    centres = short_plan.foot_centres_W()[a : b + 1]
+    meas_q = q_plan[0].copy()
+    meas_q[0] += 0.004  # the measured body 4 mm ahead: every sample is corrected a little
+    meas = Measurement(0.0, meas_q, np.ones(4, bool))
+    leg = int(np.flatnonzero(~contact.all(axis=0))[0])  # the leg that swings in the cycle
+    air = np.flatnonzero(~contact[:, leg])[1:-1]
+    q, misses = correct_cycle(robot, q_plan, contact, centres, meas, s.time[a : b + 1])
+    plan_j = np.array([robot.joints_from_q(qk)[leg] for qk in q_plan])
+    got_j = np.array([robot.joints_from_q(qk)[leg] for qk in q])
+    assert misses == 0 and 0.0 < np.abs(got_j[air] - plan_j[air]).max() < SWING_JUMP_RAD
+    kin = kinematics_of(robot)
+    real = kin.ik_leg
+
+    def other_solution(i, target, *args, **kw):  # a knee wrapped by 1 rad mid-swing
+        res = real(i, target, *args, **kw)
+        if i == leg:
+            res.joints_rad = res.joints_rad + np.array([0.0, 0.0, 1.0])
+        return res
+
+    monkeypatch.setattr(kin, "ik_leg", other_solution)
+    q, _ = correct_cycle(robot, q_plan, contact, centres, meas, s.time[a : b + 1])
+    got_j = np.array([robot.joints_from_q(qk)[leg] for qk in q])
+    np.testing.assert_array_equal(got_j[air], plan_j[air])
