@@ -253,7 +253,9 @@ def run_job(job: dict, keep_plan: bool = False) -> dict:
     ``traceback``), and for "ok": ``reached`` (validated), ``validated``, ``violations``,
     ``distance_to_goal_m``, ``steps``, ``planning_time_s`` (the local planner's),
     ``walk_time_s`` (``plan.samples.time[-1]``), ``time_ratio`` (planning / walk),
-    ``message``; ``wall_time_s``, ``host`` and ``pid`` always. With ``keep_plan`` the plan
+    ``message``, and for the recursive planner ``backtracks`` and ``retraces`` (steps undone
+    in a window, committed windows planned again); ``wall_time_s``, ``host`` and ``pid``
+    always. With ``keep_plan`` the plan
     itself is under ``plan`` (the caller writes it and drops it from the line).
     """
     import numpy as np
@@ -296,6 +298,9 @@ def run_job(job: dict, keep_plan: bool = False) -> dict:
             time_ratio=plan_s / walk_s if walk_s > 0 else None,
             message=plan.outcome["message"],
         )
+        if "backtracks" in plan.stats:  # the recursive planner's tracing back (8.5)
+            rec["backtracks"] = int(plan.stats["backtracks"])
+            rec["retraces"] = int(plan.stats.get("window_retraces", 0))
         if keep_plan:
             rec["plan"] = plan.to_dict()
     except Exception as exc:  # one failing job must not stop the others

@@ -133,6 +133,8 @@ def _row(job: dict, rec: dict | None) -> dict[str, Any]:
         "planning_time_s",
         "walk_time_s",
         "time_ratio",
+        "backtracks",
+        "retraces",
         "message",
         "error",
         "wall_time_s",
@@ -204,6 +206,13 @@ def _f(v, fmt: str) -> str:
     return "-" if v is None else format(v, fmt)
 
 
+def _backtracks(row: dict) -> str:
+    """'backtracks / retraces' of a recursive plan's row, '-' for the other planners."""
+    if row.get("backtracks") is None:
+        return "-"
+    return f"{row['backtracks']} / {row.get('retraces', 0)}"
+
+
 def render_markdown(result: dict[str, Any]) -> str:
     """The table of ``courses.md``."""
     c, m = result["config"], result["machine"]
@@ -224,18 +233,19 @@ def render_markdown(result: dict[str, Any]) -> str:
         "reached = the COM within 5 cm of the goal *and* the plan passes `stratawalk check`; "
         "ratio = planning time / time the walk takes to execute; job = wall time of the whole "
         "job (loading, planning, `check`): compare planners by it, since `global` plans "
-        "check their candidates inside their planning time.",
+        "check their candidates inside their planning time. backtracks / retraces: steps the "
+        "recursive planner (8.5) undid inside a window / committed windows it planned again.",
         "",
         "| robot | course | planner | reached | validated | steps | planning [s] | job [s] "
-        "| walk [s] | ratio | left [m] | note |",
-        "|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---|",
+        "| walk [s] | ratio | left [m] | backtracks / retraces | note |",
+        "|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---|",
     ]
     for r in result["rows"]:
         if r["status"] != "ok":
             note = r.get("error") or r["status"]
             lines.append(
                 f"| {r['robot']} | {r['terrain']} | {r['planner']} | - | - | - | - | - | - | - | - "
-                f"| {note[:80]} |"
+                f"| - | {note[:80]} |"
             )
             continue
         note = "" if r["reached"] else r.get("message", "")[:80]
@@ -251,7 +261,8 @@ def render_markdown(result: dict[str, Any]) -> str:
             f"{r['steps']} | {_f(r.get('planning_time_s'), '.1f')} | "
             f"{_f(r.get('wall_time_s'), '.1f')} | {_f(r.get('walk_time_s'), '.1f')} | "
             f"{_f(r.get('time_ratio'), '.3f')} | "
-            f"{_f(r.get('distance_to_goal_m'), '.3f')} | {note.replace('|', '/')} |"
+            f"{_f(r.get('distance_to_goal_m'), '.3f')} | {_backtracks(r)} | "
+            f"{note.replace('|', '/')} |"
         )
     ok = [r for r in result["rows"] if r["status"] == "ok"]
     lines += [

@@ -34,3 +34,28 @@ def test_jobs_carry_each_course_its_goal():
     goals = {j["terrain"]: tuple(j["goal"]) for j in jobs}
     assert goals == {"flat": tuple(GOAL_XY), "mix4m": (4.2, 0.0)}
     assert goal_for("flat", (1.0, 0.5)) == (1.0, 0.5)  # the caller's default otherwise
+
+
+def test_the_table_counts_the_recursive_planners_backtracks():
+    """A recursive job's record carries its backtracks and window retraces (8.5), and the
+    table shows them; other planners show '-'."""
+    from planner.batch import run_job
+    from planner.bench_courses import _row, render_markdown
+
+    jobs = course_jobs(courses=("flat",), planners=("soft", "recursive"), time_budget_s=60.0)
+    for job in jobs:
+        job["goal"] = [0.45, 0.0]  # a few steps
+    recs = [run_job(job) for job in jobs]
+    assert all(r["status"] == "ok" and r["reached"] for r in recs), recs
+    soft, rec = recs
+    assert "backtracks" not in soft and rec["backtracks"] >= 0 and rec["retraces"] >= 0
+    rows = [_row(j, r) for j, r in zip(jobs, recs, strict=True)]
+    config = {"start": [0.2, 0.0], "goal": [0.45, 0.0], "courses": ["flat"],
+              "time_budget_s": 60.0, "workers": 1, "scheduler": None}  # fmt: skip
+    machine = {"nproc": 2, "cpu": "", "load_average_1_5_15_at_start": [0, 0, 0],
+               "git_commit": "", "date": ""}  # fmt: skip
+    md = render_markdown({"rows": rows, "config": config, "machine": machine,
+                          "total_time_s": 1.0, "interrupted": False})  # fmt: skip
+    lines = [ln for ln in md.splitlines() if ln.startswith("| littledog | flat")]
+    assert lines[0].split("|")[12].strip() == "-"
+    assert lines[1].split("|")[12].strip() == f"{rec['backtracks']} / {rec['retraces']}"
