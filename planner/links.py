@@ -199,6 +199,15 @@ class LegLinks:
         self.points_J = pts  # per capsule (n_c, 3)
         self.owner = np.concatenate(owner)  # (P,) capsule index of each point
         self.radius = np.array([cap.radius_m for cap in caps])[self.owner]  # (P,)
+        # for path_margins: all points in their joints' frames, each point's leg, where
+        # each capsule's points start, and the frames placed by forward kinematics
+        self._pts_J = np.concatenate(pts)  # (P, 3)
+        self._point_legs = np.array([cap.leg for cap in caps])[self.owner]  # (P,)
+        self._cap_starts = np.flatnonzero(np.r_[True, self.owner[1:] != self.owner[:-1]])
+        self._ends_J = (np.array([c.a_J for c in caps]), np.array([c.b_J for c in caps]))
+        self._joint_ids = [cap.joint_id for cap in caps]
+        self._foot_ids = [self.model.getFrameId(leg.foot_frame) for leg in robot.legs]
+        self._hip_ids = [leg.joint_ids[0] for leg in robot.legs]
 
     def _fk(self, q: _Array) -> None:
         pin.forwardKinematics(self.model, self.data, q)
@@ -281,24 +290,10 @@ class LegLinks:
         return out
 
     def _anchor_distance(self, points_W: _Array, legs, swing_legs=()) -> _Array:
-        """Distance of points to where their leg is held (last forward kinematics).
-
-        A stance leg is held at its foot; a swinging leg at its hip, and its links near
-        the foot move with the foot, which keeps the swing path's own clearance: the
-        nearer of hip and foot.
-        """
-        feet, hips = [], []
-        for leg in self.robot.legs:
-            feet.append(self.data.oMf[self.model.getFrameId(leg.foot_frame)].translation)
-            hips.append(self.data.oMi[leg.joint_ids[0]].translation)
-        feet, hips = np.array(feet), np.array(hips)
-        legs = np.asarray(legs, int)
-        d = np.linalg.norm(np.asarray(points_W) - feet[legs], axis=-1)
-        swing = np.isin(legs, list(swing_legs))
-        if np.any(swing):
-            d_hip = np.linalg.norm(np.asarray(points_W) - hips[legs], axis=-1)
-            d = np.where(swing, np.minimum(d, d_hip), d)
-        return d
+        """Distance of points to where their leg is held (last forward kinematics)."""
+        feet = np.array([self.data.oMf[f].translation for f in self._foot_ids])
+        hips = np.array([self.data.oMi[j].translation for j in self._hip_ids])
+        return _anchor_distance_m(points_W, legs, swing_legs, feet, hips)
 
     def _segments(self) -> tuple[_Array, _Array]:
         a, b = [], []
@@ -332,39 +327,30 @@ class LegLinks:
         made 15 000 small terrain calls a rough2cm plan), each witness searched once for
         all scales.
         """
-        n, n_caps = len(qs), len(self.capsules)
-        point_legs = np.array([cap.leg for cap in self.capsules])[self.owner]
-        on = None if legs is None else np.isin(point_legs, list(legs))
-        joint_ids = [cap.joint_id for cap in self.capsules]
-        foot_ids = [self.model.getFrameId(leg.foot_frame) for leg in self.robot.legs]
-        hip_ids = [leg.joint_ids[0] for leg in self.robot.legs]
-        pts_J = np.concatenate(self.points_J)  # (P, 3) in their joints' frames
-        pts = np.empty((n, len(pts_J), 3))
+        n, n_caps, n_pts = len(qs), len(self.capsules), len(self._pts_J)
+        point_legs, starts, (a_J, b_J) = self._point_legs, self._cap_starts, self._ends_J
+        pts = np.empty((n, n_pts, 3))
         seg_a, seg_b = np.empty((n, n_caps, 3)), np.empty((n, n_caps, 3))
         feet, hips = np.empty((n, 4, 3)), np.empty((n, 4, 3))
-        a_J = np.array([cap.a_J for cap in self.capsules])
-        b_J = np.array([cap.b_J for cap in self.capsules])
         for k, q in enumerate(qs):
             self._fk(np.asarray(q, float))
-            R = np.array([self.data.oMi[j].rotation for j in joint_ids])  # (C, 3, 3)
-            t = np.array([self.data.oMi[j].translation for j in joint_ids])
-            pts[k] = np.einsum("pij,pj->pi", R[self.owner], pts_J) + t[self.owner]
+            R = np.array([self.data.oMi[j].rotation for j in self._joint_ids])  # (C, 3, 3)
+            t = np.array([self.data.oMi[j].translation for j in self._joint_ids])
+            pts[k] = np.einsum("pij,pj->pi", R[self.owner], self._pts_J) + t[self.owner]
             seg_a[k] = np.einsum("cij,cj->ci", R, a_J) + t
             seg_b[k] = np.einsum("cij,cj->ci", R, b_J) + t
-            feet[k] = [self.data.oMf[f].translation for f in foot_ids]
-            hips[k] = [self.data.oMi[j].translation for j in hip_ids]
-        radius = np.broadcast_to(self.radius, (n, len(pts_J)))
-        gap = np.full((n, len(pts_J)), np.inf)
-        sel = np.ones(len(pts_J), bool) if on is None else on
+            feet[k] = [self.data.oMf[f].translation for f in self._foot_ids]
+            hips[k] = [self.data.oMi[j].translation for j in self._hip_ids]
+        radius = np.broadcast_to(self.radius, (n, n_pts))
+        gap = np.full((n, n_pts), np.inf)
+        sel = np.ones(n_pts, bool) if legs is None else np.isin(point_legs, list(legs))
         gap[:, sel] = disc_clearance(
             terrain, pts[:, sel].reshape(-1, 3), radius[:, sel].reshape(-1)
         ).reshape(n, -1)
-        swinging = np.array([np.isin(point_legs, list(sw)) for sw in swing_legs])  # (N, P)
-        anchor = np.linalg.norm(pts - feet[:, point_legs], axis=-1)
-        anchor = np.where(
-            swinging, np.minimum(anchor, np.linalg.norm(pts - hips[:, point_legs], axis=-1)), anchor
-        )
-        starts = np.flatnonzero(np.r_[True, self.owner[1:] != self.owner[:-1]])
+        anchor = np.array(
+            [_anchor_distance_m(pts[k], point_legs, swing_legs[k], feet[k], hips[k])
+             for k in range(n)]
+        )  # fmt: skip
         witness: dict[tuple[int, int], tuple[Witness | None, float]] = {}
         outs = []
         for scale in scales:
@@ -379,9 +365,7 @@ class LegLinks:
                     d = 0.0
                     if w is not None:
                         p = a + w.u * (b - a)
-                        d = float(np.linalg.norm(p - feet[k, cap.leg]))
-                        if cap.leg in swing_legs[k]:
-                            d = min(d, float(np.linalg.norm(p - hips[k, cap.leg])))
+                        d = float(_anchor_distance_m(p, cap.leg, swing_legs[k], feet[k], hips[k]))
                     witness[k, c] = (w, d)
                 w, d = witness[k, c]
                 need_w = scale * (PATH_MARGIN_M + PATH_ANGLE_RAD * d)
@@ -414,17 +398,25 @@ class LegLinks:
         gap = self._gaps(terrain, q)
         return gap, self._points_W
 
-    def _gaps(self, terrain, q: _Array, on: _Array | None = None) -> _Array:
-        """(P,) clearance bound of every axis point (see :meth:`clearance_fast`).
-
-        ``on`` (P,) bool: only those points are measured, the others get +inf.
-        """
+    def _gaps(self, terrain, q: _Array) -> _Array:
+        """(P,) clearance bound of every axis point (see :meth:`clearance_fast`)."""
         pts = self._points_W = self.axis_points_W(q)
-        if on is None:
-            return disc_clearance(terrain, pts, self.radius)
-        gap = np.full(len(pts), np.inf)
-        gap[on] = disc_clearance(terrain, pts[on], self.radius[on])
-        return gap
+        return disc_clearance(terrain, pts, self.radius)
+
+
+def _anchor_distance_m(points_W, legs, swing_legs, feet_W: _Array, hips_W: _Array) -> _Array:
+    """Distance [m] of points to where their leg (``legs``, per point) is held.
+
+    A stance leg is held at its foot; a swinging leg at its hip, and its links near the
+    foot move with the foot, which keeps the swing path's own clearance: the nearer of hip
+    and foot. ``feet_W``, ``hips_W`` (4, 3): the legs' foot and hip positions.
+    """
+    points, legs = np.asarray(points_W, float), np.asarray(legs, int)
+    d = np.linalg.norm(points - feet_W[legs], axis=-1)
+    swing = np.isin(legs, list(swing_legs))
+    if np.any(swing):
+        d = np.where(swing, np.minimum(d, np.linalg.norm(points - hips_W[legs], axis=-1)), d)
+    return d
 
 
 def disc_clearance(terrain, points_W: _Array, radius_m) -> _Array:
