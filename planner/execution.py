@@ -308,23 +308,25 @@ def run_feedback(
     max_cycles: int | None = None,
     no_progress_cycles: int = 16,
     correct_plan_steps: bool = True,
+    plan_steps_first: bool = True,
     **noise,
 ) -> SimResult:
-    """Walk to the plan's goal re-planning every step from the measured state (8.3).
+    """Walk to the plan's goal step by step from the measured state (8.3, with 8.4).
 
-    The robot starts, settled, at the plan's first configuration; the soft planner
-    (section 8.2, ``local_settings``) plans one cycle at a time
-    (:meth:`planner.local.base.LocalPlanner.step`) from the measured state. It follows
-    the plan's steps first (:func:`planned_steps`: the plan's leg order, its footholds
-    tried first, body moves and swings planned anew from the measured state), since the
-    plan has looked ahead where a greedy step from a state a few centimetres off may
-    walk into a dead end (barrier75mm: the body over the barrier, a hind leg behind it
-    that no body move could free). When no body move from the measured state reaches the
-    plan's foothold, the plan's own step is executed, corrected from the measured state as
-    in 8.4 (:func:`correct_cycle`; gen:14's trailing hind leg at a 7 cm step up, a hind leg
-    stretched on relief), unless the corrected step fails a gate of
-    :func:`_follow_corrected` (reach, balance, leg links) or ``correct_plan_steps`` is
-    False. Theta2 of a plan step is also started from the plan's own body pose
+    The robot starts, settled, at the plan's first configuration and follows the plan's
+    steps (:func:`planned_steps`), each from the measured state: first the plan's own
+    step corrected as in 8.4 (:func:`correct_cycle`), where the corrected step passes the
+    gates of :func:`_follow_corrected` (reach, balance, leg links) and unless
+    ``plan_steps_first`` or ``correct_plan_steps`` is False. The plan's body poses were
+    looked ahead (8.5's windows keep the next legs a move): re-planned from states a few
+    millimetres off, step10cm's and mix4m's recursive plans stalled 1.3 m and 1.2 m
+    short (a hind leg's shank within its margin of the riser at lift-off, no body move
+    freeing it), and with their own steps corrected first both reach (with
+    ``plan_steps_first`` False, a corrected step is tried only where no body move planned
+    anew reaches the plan's foothold: gen:14's trailing hind leg at a 7 cm step up).
+    Where the gates refuse, the soft planner (section 8.2, ``local_settings``) plans the cycle
+    (:meth:`planner.local.base.LocalPlanner.step`) to the plan's foothold, its Theta2
+    started from the plan's own body pose
     (:func:`planned_body_poses`). After ``GUIDE_FAILS`` failed cycles in a row the rest of
     the walk is planned anew from the measured state (:func:`replan_rest`, at most
     ``REPLANS`` times) and its steps are followed when it reaches the goal; after that, or
@@ -405,8 +407,14 @@ def run_feedback(
             cycles += 1
             guided = g < len(guide)
             leg = guide[g][0] if guided else queue.pop()
-            step, on_plan = None, False
-            if guided:  # the plan's foothold first, from a body ever nearer the incentre
+            step, on_plan, ran = None, False, None
+            if guided and guide_cycles is not None and plan_steps_first:
+                # the plan's own step, corrected from the measured state (8.4), where its
+                # gates pass: the plan's body poses were looked ahead (8.5's windows), a
+                # pose planned anew from a state a few millimetres off may not be
+                a, b = guide_cycles[g]
+                ran = _follow_corrected(ex, meas, robot, terrain, s_plan, centres, a, b, sim)
+            if guided and ran is None:  # the plan's foothold, from a body ever nearer the incentre
                 for _, shrink in BACKOFF:
                     step = local.step(
                         state, leg, tau, local.stride_m(), shrink, guide[g][1], False,
@@ -415,23 +423,26 @@ def run_feedback(
                     if step.ok:
                         on_plan = True
                         break
-            if guided and not step.ok and step.phase == "body_move" and guide_cycles is not None:
-                # the plan's own step, corrected from the measured state (8.4): the plan
-                # passed here, where a step planned anew from a state a few centimetres
-                # off finds no body move (a hind leg stretched behind a step up)
-                a, b = guide_cycles[g]
-                ran = _follow_corrected(ex, meas, robot, terrain, s_plan, centres, a, b, sim)
-                if ran is not None:
-                    why = f"{step.diagnosis}; executed the plan's step, corrected (8.4)"
-                    local._log_failure(cycles, leg, step.phase, state, why)
-                    g, fails, steps, corrected = g + 1, 0, steps + 1, corrected + 1
-                    m.cycles += 1
-                    if g == len(guide):
-                        queue = _queue_after(st.gait, leg)
-                    if not ran:
-                        message = f"fell at {m.fall_time_s:.1f} s ({m.fall_reason})"
-                        break
-                    continue
+                if not step.ok and step.phase == "body_move" and guide_cycles is not None:
+                    if not plan_steps_first:  # else refused above, from this measurement
+                        # the plan's own step, corrected: no body move planned anew from
+                        # here reaches its foothold (a hind leg stretched behind a step up)
+                        a, b = guide_cycles[g]
+                        ran = _follow_corrected(
+                            ex, meas, robot, terrain, s_plan, centres, a, b, sim
+                        )
+                    if ran is not None:
+                        why = f"{step.diagnosis}; executed the plan's step, corrected (8.4)"
+                        local._log_failure(cycles, leg, step.phase, state, why)
+            if ran is not None:
+                g, fails, steps, corrected = g + 1, 0, steps + 1, corrected + 1
+                m.cycles += 1
+                if g == len(guide):
+                    queue = _queue_after(st.gait, leg)
+                if not ran:
+                    message = f"fell at {m.fall_time_s:.1f} s ({m.fall_reason})"
+                    break
+                continue
             # back off before giving a leg up: shorter steps over a more centred body (8.5's
             # ambitions); a failed body move leaves the robot standing where it was measured
             for frac, shrink in BACKOFF if step is None or not step.ok else ():

@@ -293,7 +293,7 @@ def test_feedback_falls_back_on_the_plans_step_corrected(short_plan, monkeypatch
         return out
 
     monkeypatch.setattr(LocalPlanner, "step", step)
-    res = run_feedback(short_plan, max_cycles=4)
+    res = run_feedback(short_plan, max_cycles=4, plan_steps_first=False)
     m, fb = res.metrics, res.executed.stats["feedback"]
     assert fb["steps"] == 4 and m.ik_misses == 0, m.summary()
     corrected = [f["cycle"] - 1 for f in fb["planner_failures"] if "corrected" in f["why"]]
@@ -308,13 +308,34 @@ def test_feedback_falls_back_on_the_plans_step_corrected(short_plan, monkeypatch
 
 def test_feedback_follows_the_plans_footholds(short_plan):
     """From the measured state, each step is re-planned onto the plan's own foothold."""
-    res = run_feedback(short_plan, max_cycles=4)
+    res = run_feedback(short_plan, max_cycles=4, plan_steps_first=False)
     fb = res.executed.stats["feedback"]
     assert fb["plan_steps_followed"] == 4 and fb["plan_steps"] == len(planned_steps(short_plan))
     kfs = res.executed.keyframes  # measured at the start of each cycle
     for k, (leg, foot) in enumerate(planned_steps(short_plan)[:3]):
         landed = kfs[k + 1].feet[leg]
         assert np.linalg.norm(landed[:2] - foot[:2]) < 0.015, (k, landed, foot)
+
+
+def test_feedback_executes_the_plans_own_steps_corrected_first(short_plan, monkeypatch):
+    """By default each plan step is the plan's own, corrected from the measurement (8.4),
+    where the corrected step passes its gates (short_plan's second step lifts with 24 mm of
+    balance margin, under the 25 mm asked: planned anew onto the plan's foothold); with no
+    gate passing (a balance margin of 1 m asked) every step is planned anew."""
+    import planner.stability
+
+    res = run_feedback(short_plan, max_cycles=4)
+    m, fb = res.metrics, res.executed.stats["feedback"]
+    assert fb["steps"] == 4 and not (m.fell or m.tipped), m.summary()
+    assert fb["plan_steps_corrected"] == 3 and fb["plan_steps_followed"] == 1, fb
+    kfs = res.executed.keyframes  # measured at the start of each cycle
+    for k, (leg, foot) in enumerate(planned_steps(short_plan)[:3]):
+        landed = kfs[k + 1].feet[leg]
+        assert np.linalg.norm(landed[:2] - foot[:2]) < 0.015, (k, landed, foot)
+    monkeypatch.setattr(planner.stability, "BALANCE_MARGIN_M", 1.0)
+    res = run_feedback(short_plan, max_cycles=2)
+    fb = res.executed.stats["feedback"]
+    assert fb["plan_steps_corrected"] == 0 and fb["plan_steps_followed"] == 2, fb
 
 
 @pytest.mark.parametrize("gate", ["balance", "links"])
