@@ -2,7 +2,8 @@
 
 ``stratawalk bench physics`` plans, for every course (the nine named courses of
 :data:`planner.bench_courses.COURSES` and ``--generated N`` courses of
-:mod:`planner.course_gen`, seeds 0..N-1), a walk with the soft local planner (8.2) from
+:mod:`planner.course_gen`, seeds 0..N-1), a walk with a local planner (``--planner``: the
+soft one of 8.2 by default, the recursive one of 8.5 or the hard one of 8.1) from
 (0.2, 0) to (2.2, 0) on a named course, or to (3.0, 0) = the end of a generated course
 minus 0.4 m, validates it (:func:`planner.validate.check_plan`, run by
 :func:`planner.walk.plan_walk`), then executes it with :func:`planner.execution.simulate_plan`
@@ -94,6 +95,7 @@ def physics_jobs(
     plans_dir: str | Path | None = None,
     first_seed: int = 0,
     planned_only: bool = False,
+    planner: str = "soft",
 ) -> list[dict]:
     """The jobs: ``courses`` (names, paths or ``gen:...`` names), then ``generated`` seeds.
 
@@ -101,6 +103,7 @@ def physics_jobs(
     ``out_dir/courses/`` and their YAML path is the job's terrain; their goal is
     :func:`planner.course_gen.course_goal_xy`, a named course's ``named_goal_xy``.
     ``planned_only``: simulate a plan only when it reached the goal and passes the check.
+    ``planner``: the local planner of every plan (soft, recursive or hard).
     """
     from planner.course_gen import (
         course_goal_xy,
@@ -126,7 +129,7 @@ def physics_jobs(
                 "course": name,
                 "group": group,
                 "terrain": terrain,
-                "planner": "soft",
+                "planner": planner,
                 "start": [float(START_XY[0]), float(START_XY[1])],
                 "goal": [float(goal[0]), float(goal[1])],
                 "modes": list(modes),
@@ -430,13 +433,21 @@ def _summary_lines(s: dict[str, Any]) -> list[str]:
     return lines
 
 
+_PLANNER_NAMES = {
+    "soft": "Soft local planner (8.2)",
+    "recursive": "Recursive local planner (8.5)",
+    "hard": "Hard-persuasion local planner (8.1)",
+}
+
+
 def render_markdown(result: dict[str, Any]) -> str:
     """``physics.md``: the setting, a table per course group, the summary."""
     c, m = result["config"], result["machine"]
     lines = [
         "# Physics benchmark (`stratawalk bench physics`)",
         "",
-        f"Soft local planner (8.2) from {tuple(c['start'])} to {tuple(c['goal_named'])} m on the "
+        f"{_PLANNER_NAMES.get(c.get('planner', 'soft'), c.get('planner'))} from "
+        f"{tuple(c['start'])} to {tuple(c['goal_named'])} m on the "
         f"named courses, to the end of the course minus 0.4 m on the generated ones "
         f"(`planner/course_gen.py`, difficulty {c['difficulty']:g}), time budget "
         f"{c['time_budget_s']:g} s; each plan executed in MuJoCo at time scale "
@@ -561,6 +572,7 @@ def run_physics_bench(
     progress: bool = True,
     first_seed: int = 0,
     planned_only: bool = False,
+    planner: str = "soft",
 ) -> dict[str, Any]:
     """Run the benchmark's jobs and write ``physics.{jsonl,json,md}`` to ``out_dir``.
 
@@ -588,13 +600,14 @@ def run_physics_bench(
         plans_dir=plans_dir,
         first_seed=first_seed,
         planned_only=planned_only,
+        planner=planner,
     )
     machine = machine_info()
     t0 = time.perf_counter()
     interrupted = run_jobs(jobs, path, workers, progress)
     config = {
         "robot": "littledog",
-        "planner": "soft",
+        "planner": planner,
         "courses": [j["course"] for j in jobs],
         "generated": generated,
         "first_seed": first_seed,
@@ -633,6 +646,9 @@ def add_physics_parser(bench_sub) -> argparse.ArgumentParser:
     )
     p.add_argument("--difficulty", type=float, default=1.0, help="of the generated courses, 0..1")
     p.add_argument("--modes", default=",".join(MODES), help="open,feedback,correct")
+    p.add_argument(
+        "--planner", default="soft", choices=["soft", "recursive", "hard"], help="local planner"
+    )
     p.add_argument("--time-budget", type=float, default=TIME_BUDGET_S, help="[s] per plan")
     p.add_argument("--time-scale", type=float, default=TIME_SCALE, help="simulated s per plan s")
     p.add_argument("--out", default="bench/results", help="output folder")
@@ -690,6 +706,7 @@ def cmd_physics(args) -> int:
         save_plans=args.save_plans,
         first_seed=args.first_seed,
         planned_only=args.planned_only,
+        planner=args.planner,
     )
     print(render_markdown(result))
     print(f"wrote {Path(args.out) / 'physics.md'} and physics.json, physics.jsonl", file=sys.stderr)

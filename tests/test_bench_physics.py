@@ -138,6 +138,9 @@ def test_markdown_has_a_table_per_group_and_the_summary(hand_made):
     flat = "| flat | open loop | yes | 8.0 | yes | no | 3.2 | 4.1 | no | 0.00 | 2.5 | 0.4 | 1.5"
     assert flat in md
     assert "RuntimeError: boom" in md and "| gen:3 | open loop | - | - | - |" in md
+    assert md.count("Soft local planner (8.2)") == 1  # a result without "planner": soft's
+    result["config"]["planner"] = "recursive"
+    assert "Recursive local planner (8.5) from (0.2, 0.0)" in render_markdown(result)
     assert "named courses, open loop: 1 of 2 reached without a fall" in md
     assert "named courses, feedback (8.3): 2 of 2" in md
     assert "the planner reached the goal on 2 of 4" in md
@@ -211,6 +214,11 @@ def test_job_list(tmp_path):
     skipping = physics_jobs(courses=(), generated=1, first_seed=7, out_dir=tmp_path,
                             planned_only=True)  # fmt: skip
     assert job_id(skipping[0]) != job_id(later[0])
+    # --planner: the local planner of every job, part of its id
+    recursive = physics_jobs(courses=(), generated=1, first_seed=7, out_dir=tmp_path,
+                             planner="recursive")  # fmt: skip
+    assert later[0]["planner"] == "soft" and recursive[0]["planner"] == "recursive"
+    assert job_id(recursive[0]) != job_id(later[0])
 
 
 def test_planned_only_skips_a_plan_that_did_not_reach(tmp_path):
