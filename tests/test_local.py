@@ -186,6 +186,43 @@ def test_hard_planner_walks_on_flat_ground(littledog):
     assert plan.stats["planner"] == "hard" and plan.stats["solves"]["theta1"]["feasible"] > 0
 
 
+def test_hard_planner_plans_a_second_walk_with_a_wider_band_where_the_first_stalls(
+    littledog, monkeypatch
+):
+    """8.1 stalled on barrier75mm with the COM within 3 cm of tau and reaches with 4 cm:
+    where the first walk stops short with time left, a second walk gets the wider band and
+    the rest of the budget, and the walk ending nearer the goal is returned; a walk that
+    reaches, or one that used the whole budget, is returned as it is."""
+    from planner.local.base import LocalPlan, LocalPlanner, LocalSettings
+    from planner.local.hard import LATERAL_BAND_M, WIDE_LATERAL_BAND_M, HardPlanner
+
+    calls, outcomes = [], []
+
+    def fake_plan(self, *args):
+        calls.append((self.lateral_band_m, self.settings.time_budget_s))
+        reached, dist, spent = outcomes[len(calls) - 1]
+        stats = {"planning_time_s": spent, "steps": 3}
+        return LocalPlan([], [], [], reached, dist, "stuck" if not reached else "", stats)
+
+    monkeypatch.setattr(LocalPlanner, "plan", fake_plan)
+    hard = HardPlanner(littledog, load_terrain("flat"), settings=LocalSettings(time_budget_s=100))
+    outcomes[:] = [(False, 1.4, 30.0), (True, 0.01, 20.0)]
+    out = hard.plan((0.2, 0.0), (2.2, 0.0))
+    assert calls == [(LATERAL_BAND_M, 100.0), (WIDE_LATERAL_BAND_M, 70.0)]
+    assert out.reached_goal and out.stats["planning_time_s"] == 50.0
+    assert out.stats["wide_band_retry"]["kept"] == "second"
+    assert hard.lateral_band_m == LATERAL_BAND_M and hard.settings.time_budget_s == 100
+    calls.clear()
+    outcomes[:] = [(False, 1.0, 30.0), (False, 1.3, 70.0)]  # the first ends nearer
+    out = hard.plan((0.2, 0.0), (2.2, 0.0))
+    assert out.distance_to_goal_m == 1.0 and out.stats["wide_band_retry"]["kept"] == "first"
+    for first in [(True, 0.01, 30.0), (False, 1.0, 100.0)]:  # reached; no time left
+        calls.clear()
+        outcomes[:] = [first]
+        assert hard.plan((0.2, 0.0), (2.2, 0.0)).distance_to_goal_m == first[1]
+        assert len(calls) == 1
+
+
 def test_hard_planner_climbs_a_step_with_the_com_over_tau(littledog):
     """8.1 up a 4 cm step (issue 15 item 3): the plan passes the validator and every body
     move onto three legs ends with the COM over tau, beside it by at most the lateral band."""

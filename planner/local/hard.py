@@ -19,7 +19,8 @@ A failure (no feasible lambda, or no foothold) moves on to the next leg of S: un
 gait step queue of 8.2, a failed leg waits a whole cycle (section 8.2, comment ii). The
 planner is stuck after ``max_fails_in_row`` failures in a row (two cycles by default).
 Less robust than 8.2: the COM cannot leave tau to find balance. Beyond the paper, two
-freedoms: the COM may sit beside tau, by at most ``LATERAL_BAND_M``, where it is deepest
+freedoms: the COM may sit beside tau, by at most ``LATERAL_BAND_M`` (``WIDE_LATERAL_BAND_M``
+in a second walk where the first stalls), where it is deepest
 inside the support triangle (on tau itself a crawl's three-leg COM is 16 mm from the
 diagonal edge at best on flat ground, and MuJoCo tips over below about 20 mm,
 :mod:`planner.stability`); and its height is free within ``HEIGHT_BAND_M`` of the target's
@@ -29,6 +30,8 @@ feet, via poses) and swings are the soft planner's.
 """
 
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 
@@ -49,8 +52,15 @@ SCAN_STRIDES = (-1.0, 1.5)  # the window of lambdas screened, in strides from th
 SCAN_STEP = 0.125  # ... every this many strides
 MAX_SCREENED_SOLVES = 4  # Theta1 solves over the screened lambdas before Omega's bisection
 LATERAL_BAND_M = 0.03  # the COM target may sit this far beside tau
+# ... and this far in a second walk, planned when the first stalls within the time budget
+# (:meth:`HardPlanner.plan`). At 3 cm hard stalled 1.48 m short on barrier75mm (the front
+# feet stopped before the barrier, the hind ones caught up, no support triangle held a COM
+# within 3 cm of tau); at 4 cm it reaches, and so do the other named courses, but a 4 cm
+# step climb that 3 cm walks stalled (5 cm everywhere: stairs stalled); 5 cm only after
+# the dead end, or in the steps retraced before it, did not reach
+WIDE_LATERAL_BAND_M = 0.04
 HEIGHT_BAND_M = 0.03  # the COM's height is free this far around the target's (Theta1)
-LATERAL_SAMPLES = 13  # offsets tried across the band (5 mm apart)
+LATERAL_SPACING_M = 0.005  # offsets tried across the band this far apart
 
 
 def _unheld(why: str) -> ThetaSolution:
@@ -73,6 +83,37 @@ class HardPlanner(SoftPlanner):
         super().__init__(robot, terrain, mu, settings)
         self._theta1: dict[tuple[int, ...], Theta1] = {}
         self.stats["theta1"] = [0, 0]
+        self.lateral_band_m = LATERAL_BAND_M
+
+    def plan(self, start_xy, goal_xy, tau=None, progress=None, start_state=None):
+        """8.1's walk (:meth:`LocalPlanner.plan`), planned twice where the first stalls.
+
+        Where the first walk stops short of the goal with time left in the budget, a
+        second one from the start has the COM free within ``WIDE_LATERAL_BAND_M`` of tau
+        (the rest of the budget); the walk that ends nearer the goal is returned, its
+        ``stats["wide_band_retry"]`` saying so.
+        """
+        args = (start_xy, goal_xy, tau, progress, start_state)
+        first = super().plan(*args)
+        budget = float(self.settings.time_budget_s)
+        spent = float(first.stats["planning_time_s"])
+        if first.reached_goal or "interrupted" in first.message or spent >= budget:
+            return first
+        kept = self.settings
+        self.settings = replace(kept, time_budget_s=budget - spent)
+        self.lateral_band_m = WIDE_LATERAL_BAND_M
+        try:
+            second = super().plan(*args)
+        finally:
+            self.settings, self.lateral_band_m = kept, LATERAL_BAND_M
+        best = second if second.distance_to_goal_m < first.distance_to_goal_m else first
+        best.stats["planning_time_s"] = spent + float(second.stats["planning_time_s"])
+        best.stats["wide_band_retry"] = {
+            "first_distance_to_goal_m": first.distance_to_goal_m,
+            "first_message": first.message,
+            "kept": "second" if best is second else "first",
+        }
+        return best
 
     def theta1(self, support) -> Theta1:
         """Theta1 for a support pattern (built on first use)."""
@@ -98,18 +139,21 @@ class HardPlanner(SoftPlanner):
         return bool(res.ratio <= TORQUE_FRACTION)
 
     def lateral_offset(self, state: State, leg: int, tau: Trajectory, lam: float) -> np.ndarray:
-        """Horizontal offset [m] of the COM target from tau(lam), within ``LATERAL_BAND_M``.
+        """Horizontal offset [m] of the COM target from tau(lam), within the lateral band.
 
-        The offset beside tau (across u_f) that puts the COM deepest inside the three stance
-        feet's triangle: the support margin is concave along the line, so the best of
-        ``LATERAL_SAMPLES`` evenly spaced offsets is within half a spacing of its optimum.
+        The band is ``lateral_band_m`` (``LATERAL_BAND_M``, or ``WIDE_LATERAL_BAND_M`` in a
+        second walk). The offset beside tau (across u_f) that puts the COM deepest inside
+        the three stance feet's triangle: the support margin is concave along the line, so
+        the best of the offsets ``LATERAL_SPACING_M`` apart is within half a spacing of
+        its optimum.
         """
         p = np.asarray(tau.point(lam), float).reshape(3)
         u_f, _ = reference_directions(tau, self.terrain, p, lam=lam)
         side = np.cross([0.0, 0.0, 1.0], u_f)
         side /= max(float(np.linalg.norm(side)), 1e-12)
         sup = state.feet_W[[i for i in range(4) if i != leg]]
-        offsets = np.linspace(-LATERAL_BAND_M, LATERAL_BAND_M, LATERAL_SAMPLES)
+        band = self.lateral_band_m
+        offsets = np.linspace(-band, band, 2 * int(round(band / LATERAL_SPACING_M)) + 1)
         margins = [support_margin_m(sup, p + s * side) for s in offsets]
         return float(offsets[int(np.argmax(margins))]) * side
 
