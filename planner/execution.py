@@ -308,26 +308,27 @@ def run_feedback(
     max_cycles: int | None = None,
     no_progress_cycles: int = 16,
     correct_plan_steps: bool = True,
-    plan_steps_first: bool = True,
+    plan_steps_first: bool = False,
     **noise,
 ) -> SimResult:
     """Walk to the plan's goal step by step from the measured state (8.3, with 8.4).
 
     The robot starts, settled, at the plan's first configuration and follows the plan's
-    steps (:func:`planned_steps`), each from the measured state: first the plan's own
-    step corrected as in 8.4 (:func:`correct_cycle`), where the corrected step passes the
-    gates of :func:`_follow_corrected` (reach, balance, leg links) and unless
-    ``plan_steps_first`` or ``correct_plan_steps`` is False. The plan's body poses were
-    looked ahead (8.5's windows keep the next legs a move): re-planned from states a few
-    millimetres off, step10cm's and mix4m's recursive plans stalled 1.3 m and 1.2 m
-    short (a hind leg's shank within its margin of the riser at lift-off, no body move
-    freeing it), and with their own steps corrected first both reach (with
-    ``plan_steps_first`` False, a corrected step is tried only where no body move planned
-    anew reaches the plan's foothold: gen:14's trailing hind leg at a 7 cm step up).
-    Where the gates refuse, the soft planner (section 8.2, ``local_settings``) plans the cycle
-    (:meth:`planner.local.base.LocalPlanner.step`) to the plan's foothold, its Theta2
-    started from the plan's own body pose
-    (:func:`planned_body_poses`). After ``GUIDE_FAILS`` failed cycles in a row the rest of
+    steps (:func:`planned_steps`), each from the measured state: the soft planner (section
+    8.2, ``local_settings``) plans the cycle (:meth:`planner.local.base.LocalPlanner.step`)
+    onto the plan's foothold, with the body nearer the support's incentre if need be,
+    Theta2 also started from the plan's own body pose; where no body move reaches the
+    plan's foothold, the plan's own step is executed, corrected from the measured state as
+    in 8.4 (:func:`correct_cycle`; gen:14's trailing hind leg at a 7 cm step up), if the
+    corrected step passes the gates of :func:`_follow_corrected` (reach, balance, leg
+    links) and ``correct_plan_steps``. With ``plan_steps_first`` the corrected plan step
+    comes first, wherever its gates pass: the plan's body poses were looked ahead (8.5's
+    windows), and step10cm's and mix4m's recursive plans, whose steps re-planned from
+    states a few millimetres off stalled 1.3 m and 1.2 m short, reach so; barrier75mm's
+    recursive plan falls so at 28 s and reaches with the default. The outcomes at such
+    barriers flip with one step's difference (chaotic); neither order wins everywhere
+    (``bench/results/physics_recursive.md``). After ``GUIDE_FAILS`` failed cycles in a
+    row the rest of
     the walk is planned anew from the measured state (:func:`replan_rest`, at most
     ``REPLANS`` times) and its steps are followed when it reaches the goal; after that, or
     past the plan's last step, the gait queue and Lambda_t take over. Measurements come
@@ -838,6 +839,11 @@ def add_simulate_parser(subparsers) -> Any:
     p.add_argument("--noise-deg", type=float, default=0.0, help="angle noise sigma [deg]")
     p.add_argument("--latency", type=float, default=0.0, help="measurement latency [s]")
     p.add_argument("--seed", type=int, default=0, help="noise seed")
+    p.add_argument(
+        "--plan-steps-first",
+        action="store_true",
+        help="with --feedback: each step is first the plan's own, corrected (8.4)",
+    )
     p.add_argument("--out", help="write the executed motion here (stratawalk.plan/1)")
     p.add_argument(
         "--trajectory",
@@ -866,6 +872,8 @@ def cmd_simulate(args) -> int:
     )
     settings.control_dt_s = max(settings.control_dt_s, settings.timestep_s)
     mode = "feedback" if args.feedback else "correct" if args.correct else "open"
+    if args.plan_steps_first and mode != "feedback":
+        raise InputError("--plan-steps-first: a feedback option; add --feedback")
     kwargs = {}
     if mode != "open":
         kwargs = {
@@ -874,6 +882,8 @@ def cmd_simulate(args) -> int:
             "latency_s": args.latency,
             "seed": args.seed,
         }
+    if args.plan_steps_first:
+        kwargs["plan_steps_first"] = True
     if args.trajectory:
         from planner.export import load_trajectory, plan_from_trajectory
 

@@ -166,6 +166,12 @@ def test_a_plan_whose_urdf_moved_names_the_fix(short_flat_walk, tmp_path, capsys
     _one_line_error(capsys, "--robot solo12", "joints")
 
 
+def test_plan_steps_first_is_a_feedback_option(short_flat_walk, capsys):
+    path, _, _ = short_flat_walk
+    assert main(["simulate", str(path), "--plan-steps-first", "--quiet"]) == 2
+    _one_line_error(capsys, "--plan-steps-first", "--feedback")
+
+
 # ------------------------------------------------------------------------------ check
 def test_check_rejects_an_empty_plan(short_flat_walk, tmp_path, capsys):
     path, _, _ = short_flat_walk

@@ -318,13 +318,13 @@ def test_feedback_follows_the_plans_footholds(short_plan):
 
 
 def test_feedback_executes_the_plans_own_steps_corrected_first(short_plan, monkeypatch):
-    """By default each plan step is the plan's own, corrected from the measurement (8.4),
+    """With plan_steps_first each plan step is the plan's own, corrected from the measurement (8.4),
     where the corrected step passes its gates (short_plan's second step lifts with 24 mm of
     balance margin, under the 25 mm asked: planned anew onto the plan's foothold); with no
     gate passing (a balance margin of 1 m asked) every step is planned anew."""
     import planner.stability
 
-    res = run_feedback(short_plan, max_cycles=4)
+    res = run_feedback(short_plan, max_cycles=4, plan_steps_first=True)
     m, fb = res.metrics, res.executed.stats["feedback"]
     assert fb["steps"] == 4 and not (m.fell or m.tipped), m.summary()
     assert fb["plan_steps_corrected"] == 3 and fb["plan_steps_followed"] == 1, fb
@@ -333,7 +333,7 @@ def test_feedback_executes_the_plans_own_steps_corrected_first(short_plan, monke
         landed = kfs[k + 1].feet[leg]
         assert np.linalg.norm(landed[:2] - foot[:2]) < 0.015, (k, landed, foot)
     monkeypatch.setattr(planner.stability, "BALANCE_MARGIN_M", 1.0)
-    res = run_feedback(short_plan, max_cycles=2)
+    res = run_feedback(short_plan, max_cycles=2, plan_steps_first=True)
     fb = res.executed.stats["feedback"]
     assert fb["plan_steps_corrected"] == 0 and fb["plan_steps_followed"] == 2, fb
 
