@@ -409,12 +409,15 @@ def run_feedback(
             guided = g < len(guide)
             leg = guide[g][0] if guided else queue.pop()
             step, on_plan, ran = None, False, None
-            if guided and guide_cycles is not None and plan_steps_first:
-                # the plan's own step, corrected from the measured state (8.4), where its
-                # gates pass: the plan's body poses were looked ahead (8.5's windows), a
-                # pose planned anew from a state a few millimetres off may not be
-                a, b = guide_cycles[g]
-                ran = _follow_corrected(ex, meas, robot, terrain, s_plan, centres, a, b, sim)
+            # the plan's own step, corrected from the measured state (8.4), where its gates
+            # pass: first with plan_steps_first (the plan's body poses were looked ahead),
+            # else where no body move planned anew reaches the plan's foothold (a hind leg
+            # stretched behind a step up); one try per cycle, from this measurement
+            may_correct = guided and guide_cycles is not None
+            if may_correct and plan_steps_first:
+                ran = _follow_corrected(
+                    ex, meas, robot, terrain, s_plan, centres, *guide_cycles[g], sim
+                )
             if guided and ran is None:  # the plan's foothold, from a body ever nearer the incentre
                 for _, shrink in BACKOFF:
                     step = local.step(
@@ -424,14 +427,15 @@ def run_feedback(
                     if step.ok:
                         on_plan = True
                         break
-                if not step.ok and step.phase == "body_move" and guide_cycles is not None:
-                    if not plan_steps_first:  # else refused above, from this measurement
-                        # the plan's own step, corrected: no body move planned anew from
-                        # here reaches its foothold (a hind leg stretched behind a step up)
-                        a, b = guide_cycles[g]
-                        ran = _follow_corrected(
-                            ex, meas, robot, terrain, s_plan, centres, a, b, sim
-                        )
+                if (
+                    may_correct
+                    and not plan_steps_first
+                    and step.phase == "body_move"
+                    and not step.ok
+                ):
+                    ran = _follow_corrected(
+                        ex, meas, robot, terrain, s_plan, centres, *guide_cycles[g], sim
+                    )
                     if ran is not None:
                         why = f"{step.diagnosis}; executed the plan's step, corrected (8.4)"
                         local._log_failure(cycles, leg, step.phase, state, why)
