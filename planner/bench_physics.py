@@ -79,6 +79,8 @@ def job_id(job: dict) -> str:
     fields = {k: job[k] for k in _ID_FIELDS}
     if job.get("planned_only"):
         fields["planned_only"] = True
+    if job.get("preset", "default") != "default":
+        fields["preset"] = job["preset"]
     text = json.dumps(fields, sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
@@ -96,6 +98,7 @@ def physics_jobs(
     first_seed: int = 0,
     planned_only: bool = False,
     planner: str = "soft",
+    preset: str = "default",
 ) -> list[dict]:
     """The jobs: ``courses`` (names, paths or ``gen:...`` names), then ``generated`` seeds.
 
@@ -103,7 +106,8 @@ def physics_jobs(
     ``out_dir/courses/`` and their YAML path is the job's terrain; their goal is
     :func:`planner.course_gen.course_goal_xy`, a named course's ``named_goal_xy``.
     ``planned_only``: simulate a plan only when it reached the goal and passes the check.
-    ``planner``: the local planner of every plan (soft, recursive or hard).
+    ``planner``: the local planner of every plan (soft, recursive or hard); ``preset``:
+    its settings (``stratawalk plan --preset``), "default" the defaults.
     """
     from planner.course_gen import (
         course_goal_xy,
@@ -130,6 +134,7 @@ def physics_jobs(
                 "group": group,
                 "terrain": terrain,
                 "planner": planner,
+                "preset": preset,
                 "start": [float(START_XY[0]), float(START_XY[1])],
                 "goal": [float(goal[0]), float(goal[1])],
                 "modes": list(modes),
@@ -143,6 +148,24 @@ def physics_jobs(
 
 
 # ------------------------------------------------------------------------------ one job
+def _job_settings(job: dict):
+    """The local planner's settings of a job: its preset's, with its time budget."""
+    from dataclasses import replace
+
+    from planner.local.base import LocalSettings
+
+    budget = float(job["time_budget_s"])
+    name = job.get("preset", "default")
+    if name == "default":
+        return LocalSettings(time_budget_s=budget)
+    from planner.robot import load_robot
+    from planner.robot_scale import length_scale
+    from planner.settings import preset, resolve
+
+    local = resolve(preset(name, length_scale(load_robot(job["robot"])))).local
+    return replace(local, time_budget_s=budget)
+
+
 def _sim_fields(metrics: dict) -> dict[str, Any]:
     """The row's columns from :meth:`planner.simulate.Metrics.to_dict` (cm, mm, %)."""
 
@@ -186,7 +209,6 @@ def run_physics_job(job: dict) -> dict:
     head = {"course": job["course"], "group": job["group"]}
     plan, planning = None, {}
     try:
-        from planner.local.base import LocalSettings
         from planner.walk import plan_walk
 
         plan, report = plan_walk(  # runs planner.validate.check_plan on the plan
@@ -195,7 +217,7 @@ def run_physics_job(job: dict) -> dict:
             tuple(job["goal"]),
             tuple(job["start"]),
             job["planner"],
-            LocalSettings(time_budget_s=float(job["time_budget_s"])),
+            _job_settings(job),
         )
         reached = bool(plan.outcome["reached_goal"])
         planning = {
@@ -446,7 +468,9 @@ def render_markdown(result: dict[str, Any]) -> str:
     lines = [
         "# Physics benchmark (`stratawalk bench physics`)",
         "",
-        f"{_PLANNER_NAMES.get(c.get('planner', 'soft'), c.get('planner'))} from "
+        f"{_PLANNER_NAMES.get(c.get('planner', 'soft'), c.get('planner'))}"
+        f"{'' if c.get('preset', 'default') == 'default' else ' (--preset ' + c['preset'] + ')'}"
+        " from "
         f"{tuple(c['start'])} to {tuple(c['goal_named'])} m on the "
         f"named courses, to the end of the course minus 0.4 m on the generated ones "
         f"(`planner/course_gen.py`, difficulty {c['difficulty']:g}), time budget "
@@ -573,6 +597,7 @@ def run_physics_bench(
     first_seed: int = 0,
     planned_only: bool = False,
     planner: str = "soft",
+    preset: str = "default",
 ) -> dict[str, Any]:
     """Run the benchmark's jobs and write ``physics.{jsonl,json,md}`` to ``out_dir``.
 
@@ -601,6 +626,7 @@ def run_physics_bench(
         first_seed=first_seed,
         planned_only=planned_only,
         planner=planner,
+        preset=preset,
     )
     machine = machine_info()
     t0 = time.perf_counter()
@@ -608,6 +634,7 @@ def run_physics_bench(
     config = {
         "robot": "littledog",
         "planner": planner,
+        "preset": preset,
         "courses": [j["course"] for j in jobs],
         "generated": generated,
         "first_seed": first_seed,
@@ -648,6 +675,9 @@ def add_physics_parser(bench_sub) -> argparse.ArgumentParser:
     p.add_argument("--modes", default=",".join(MODES), help="open,feedback,correct")
     p.add_argument(
         "--planner", default="soft", choices=["soft", "recursive", "hard"], help="local planner"
+    )
+    p.add_argument(
+        "--preset", default="default", help="settings of every plan: default, or plan --preset's"
     )
     p.add_argument("--time-budget", type=float, default=TIME_BUDGET_S, help="[s] per plan")
     p.add_argument("--time-scale", type=float, default=TIME_SCALE, help="simulated s per plan s")
@@ -693,6 +723,10 @@ def cmd_physics(args) -> int:
         raise InputError(f"--time-scale: must be > 0, got {args.time_scale}")
     if args.workers < 1:
         raise InputError(f"--workers: must be >= 1, got {args.workers}")
+    if args.preset != "default":
+        from planner.settings import preset
+
+        preset(args.preset)  # an unknown name fails here, not in every job
     result = run_physics_bench(
         courses=courses,
         generated=args.generated,
@@ -707,6 +741,7 @@ def cmd_physics(args) -> int:
         first_seed=args.first_seed,
         planned_only=args.planned_only,
         planner=args.planner,
+        preset=args.preset,
     )
     print(render_markdown(result))
     print(f"wrote {Path(args.out) / 'physics.md'} and physics.json, physics.jsonl", file=sys.stderr)

@@ -9,8 +9,10 @@ course is executed in MuJoCo at its own timing, open loop and with feedback (8.3
 more run under :mod:`cProfile` splits that time by where it is spent: each function's
 *own* time goes to the group of its module (:data:`GROUPS`); a function outside the
 package (numpy, CasADi, Pinocchio, builtins) counts for the group of its heaviest caller,
-so the parts add up to the profiled total. Flat walks of 1, 2, 4 and 8 m
-(``FLAT_LENGTHS_M``) show how the cost grows with the length of the walk. Writes
+so the parts add up to the profiled total. Each course is measured with every preset of
+``presets`` side by side ("default": the settings' defaults; "fast": ``stratawalk plan
+--preset fast``, :data:`planner.settings.PRESETS`). Flat walks of 1, 2, 4 and 8 m
+(``FLAT_LENGTHS_M``, the first preset) show how the cost grows with the length of the walk. Writes
 ``speed.json`` and ``speed.md``. Timings are measurements of this machine, never asserted
 in tests.
 """
@@ -39,6 +41,7 @@ __all__ = [
 
 # (terrain, goal x [m]) from (0.2, 0): issue 16's courses, walks of 2 m
 COURSES = ("rough2cm", "flat", "step5cm", "stairs")
+PRESETS = ("default", "fast")  # the settings compared side by side
 FLAT_LENGTHS_M = (1.0, 2.0, 4.0, 8.0)
 START_XY = (0.2, 0.0)
 # where the time goes: the first group whose any path fragment is in a module's file name
@@ -108,23 +111,43 @@ def _flat(length_m: float):
     return Terrain.from_spec(spec, source="bench speed")
 
 
+def _settings(preset: str):
+    """The local planner's settings of ``preset`` ("default": None, the defaults)."""
+    if preset == "default":
+        return None
+    from planner.robot import load_robot
+    from planner.robot_scale import length_scale
+    from planner.settings import preset as preset_values
+    from planner.settings import resolve
+
+    return resolve(preset_values(preset, length_scale(load_robot("littledog")))).local
+
+
 def _plan_once(
-    terrain_name: str, length_m: float | None, goal_x: float, profile: bool, sim: bool = False
+    terrain_name: str,
+    length_m: float | None,
+    goal_x: float,
+    profile: bool,
+    sim: bool = False,
+    preset: str = "default",
 ):
     """One plan in this process: its figures, wall time and (``profile``) time per group.
 
     ``sim``: the plan is then executed in MuJoCo at time scale 1, open loop and with
-    feedback (8.3), each summarised by :func:`_sim_summary`.
+    feedback (8.3), each summarised by :func:`_sim_summary`. ``preset``: the settings.
     """
     from planner.terrain import load_terrain
     from planner.walk import plan_walk
 
     terrain = _flat(length_m) if length_m is not None else load_terrain(terrain_name)
+    settings = _settings(preset)
     prof = cProfile.Profile() if profile else None
     t0 = time.perf_counter()
     if prof is not None:
         prof.enable()
-    plan, report = plan_walk("littledog", terrain, goal_xy=(goal_x, 0.0), start_xy=START_XY)
+    plan, report = plan_walk(
+        "littledog", terrain, goal_xy=(goal_x, 0.0), start_xy=START_XY, settings=settings
+    )
     if prof is not None:
         prof.disable()
     wall = time.perf_counter() - t0
@@ -177,13 +200,23 @@ def _fresh(*args):
         return pool.submit(_plan_once, *args).result()
 
 
-def _measure(name: str, length_m: float | None, goal_x: float, repeats: int, profile: bool):
-    runs = [_fresh(name, length_m, goal_x, False, profile and i == 0) for i in range(repeats)]
+def _measure(
+    name: str,
+    length_m: float | None,
+    goal_x: float,
+    repeats: int,
+    profile: bool,
+    preset: str = "default",
+):
+    runs = [
+        _fresh(name, length_m, goal_x, False, profile and i == 0, preset) for i in range(repeats)
+    ]
     planning = [r["planning_s"] for r in runs]
     metres = goal_x - START_XY[0]
     last = runs[-1]
     row: dict[str, Any] = {
         "course": name,
+        "preset": preset,
         "walk_m": metres,
         "repeats": repeats,
         "reached": all(r["reached"] for r in runs),
@@ -199,7 +232,7 @@ def _measure(name: str, length_m: float | None, goal_x: float, repeats: int, pro
     }
     row["planning_to_walk"] = row["planning_median_s"] / last["walk_s"] if last["walk_s"] else None
     if profile:
-        groups = _fresh(name, length_m, goal_x, True)["groups"]
+        groups = _fresh(name, length_m, goal_x, True, False, preset)["groups"]
         row["profile_total_s"] = sum(groups.values())
         row["breakdown_s"] = groups
     return row
@@ -211,6 +244,7 @@ def run_speed_bench(
     flat_lengths_m=FLAT_LENGTHS_M,
     repeats: int = 5,
     out_dir: str | Path = "bench/results",
+    presets=PRESETS,
 ) -> dict[str, Any]:
     """Measure, write ``speed.json`` and ``speed.md`` to ``out_dir``; returns the JSON's content."""
     from planner.machine import machine_info
@@ -218,12 +252,16 @@ def run_speed_bench(
 
     machine = machine_info()
     t0 = time.perf_counter()
-    rows = [_measure(c, None, goal_x, repeats, True) for c in courses]
-    flats = [_measure(f"flat {m:g} m", m, START_XY[0] + m, repeats, False) for m in flat_lengths_m]
+    rows = [_measure(c, None, goal_x, repeats, True, p) for c in courses for p in presets]
+    flats = [
+        _measure(f"flat {m:g} m", m, START_XY[0] + m, repeats, False, presets[0])
+        for m in flat_lengths_m
+    ]
     result = {
         "format": "stratawalk.bench.speed/1",
         "config": {"courses": list(courses), "goal_x": goal_x, "repeats": repeats,
-                   "flat_lengths_m": list(flat_lengths_m), "start": list(START_XY)},
+                   "flat_lengths_m": list(flat_lengths_m), "start": list(START_XY),
+                   "presets": list(presets)},
         "machine": machine,
         "total_time_s": time.perf_counter() - t0,
         "courses": rows,
@@ -258,20 +296,25 @@ def render_markdown(result: dict[str, Any]) -> str:
         "under cProfile, own time per group of modules (a library function counts for its "
         "heaviest caller's group), in % of the profiled total (profiling slows it down).",
         "",
-        "| course | reached, check | steps | planning [s] | per m [s] | total [s] | walk [s] "
+        "Presets: default = the settings' defaults (the paper's Lambda_c, 0.5 m/s^2); fast = "
+        "`stratawalk plan --preset fast` (two body moves per crawl cycle, long strides on "
+        "level ground, 1.5 m/s^2, 2 cm swing height).",
+        "",
+        "| course | preset | reached, check | steps | planning [s] | per m [s] | total [s] "
+        "| walk [s] "
         "| walk speed [cm/s] | planning / walk | "
         + " | ".join(f"{lbl} [%]" for _, lbl, _ in GROUPS)
         + " |",
-        "|---|---|---:|---:|---:|---:|---:|---:|---:|" + "---:|" * len(keys),
+        "|---|---|---|---:|---:|---:|---:|---:|---:|---:|" + "---:|" * len(keys),
     ]
     for r in result["courses"]:
         total = r.get("profile_total_s") or 0.0
         parts = [_f(100.0 * r["breakdown_s"][k] / total if total else None, ".0f") for k in keys]
         lines.append(
-            f"| {r['course']} | {'yes' if r['reached'] else 'no'}, "
+            f"| {r['course']} | {r.get('preset', 'default')} | {'yes' if r['reached'] else 'no'}, "
             f"{'ok' if r['check_ok'] else 'NOT ok'} | {r['steps']} "
             f"| {r['planning_median_s']:.2f} | {r['planning_per_m_s']:.2f} "
-            f"| {r['total_median_s']:.2f} | {r['walk_s']:.0f} | {_f(r['walk_speed_cm_s'], '.2f')} "
+            f"| {r['total_median_s']:.2f} | {r['walk_s']:.1f} | {_f(r['walk_speed_cm_s'], '.2f')} "
             f"| {_f(r['planning_to_walk'], '.3f')} | " + " | ".join(parts) + " |"
         )
     lines += [
@@ -282,21 +325,24 @@ def render_markdown(result: dict[str, Any]) -> str:
         "open loop, the final base within 5 cm of the plan's; feedback (8.3), the COM within "
         "5 cm of the goal.",
         "",
-        "| course | walk speed [cm/s] | open loop | final error [cm] | feedback "
+        "| course | preset | walk speed [cm/s] | open loop | final error [cm] | feedback "
         "| COM to goal [cm] |",
-        "|---|---:|---|---:|---|---:|",
+        "|---|---|---:|---|---:|---|---:|",
     ]
     for r in result["courses"]:
         mj = r.get("mujoco") or {}
         op, fb = mj.get("open"), mj.get("feedback")
         lines.append(
-            f"| {r['course']} | {_f(r['walk_speed_cm_s'], '.2f')} | {_verdict(op)} "
+            f"| {r['course']} | {r.get('preset', 'default')} "
+            f"| {_f(r['walk_speed_cm_s'], '.2f')} | {_verdict(op)} "
             f"| {_f(op and op['final_error_cm'], '.1f')} | {_verdict(fb)} "
             f"| {_f(fb and fb['com_to_goal_cm'], '.1f')} |"
         )
     lines += [
         "",
         "## Flat walks by length",
+        "",
+        f"Preset {c.get('presets', ['default'])[0]}.",
         "",
         "| walk [m] | reached, check | steps | planning [s] | per m [s] | total [s] "
         "| x the 2 m walk |",
@@ -334,6 +380,11 @@ def add_speed_parser(subparsers) -> Any:
         default=",".join(f"{v:g}" for v in FLAT_LENGTHS_M),
         help="[m] flat walks, comma-separated",
     )
+    p.add_argument(
+        "--presets",
+        default=",".join(PRESETS),
+        help="settings compared side by side: default and/or presets of plan --preset",
+    )
     p.add_argument("--out", default="bench/results", help="output folder")
     p.set_defaults(func=cmd_speed)
     return p
@@ -355,11 +406,19 @@ def cmd_speed(args) -> int:
     if any(not 0.1 <= v <= 50.0 for v in lengths):
         raise InputError(f"--flat-lengths: each in [0.1, 50] m, got {args.flat_lengths!r}")
     courses = tuple(s.strip() for s in args.courses.split(",") if s.strip())
+    presets = tuple(s.strip() for s in args.presets.split(",") if s.strip())
+    from planner.settings import PRESETS as KNOWN
     from planner.terrain import load_terrain
+
+    for p in presets:
+        if p != "default" and p not in KNOWN:
+            raise InputError(f"--presets: unknown {p!r}; known: default, {', '.join(KNOWN)}")
+    if not presets:
+        raise InputError("--presets: name at least one (default, fast)")
 
     for c in courses:
         load_terrain(c)  # a bad name fails here, before any planning
-    result = run_speed_bench(courses, args.goal_x, lengths, args.repeats, args.out)
+    result = run_speed_bench(courses, args.goal_x, lengths, args.repeats, args.out, presets)
     print(render_markdown(result))
     print(f"wrote {Path(args.out) / 'speed.md'} and speed.json")
     return 0

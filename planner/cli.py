@@ -149,11 +149,13 @@ def _join_negative_xy(argv: list[str]) -> list[str]:
     return out
 
 
-def _user_settings(args):
-    """The plan command's settings: --config file, then the options (planner.settings)."""
-    from planner.settings import SETTINGS, load_config, resolve
+def _user_settings(args, robot):
+    """The plan command's settings: --preset, --config file, then the options (planner.settings)."""
+    from planner.robot_scale import length_scale
+    from planner.settings import SETTINGS, load_config, preset, resolve
 
-    config = load_config(args.config) if args.config else {}
+    config = preset(args.preset, length_scale(robot)) if args.preset else {}
+    config.update(load_config(args.config) if args.config else {})
     options = {st.name: getattr(args, _dest(st)) for st in SETTINGS}
     return resolve(config, options)
 
@@ -173,13 +175,18 @@ def _cmd_plan(args) -> int:
     from planner.terrain import load_terrain
     from planner.walk import PLANNERS, check_endpoints, plan_walk
 
-    user = _user_settings(args)
-    settings = replace(user.local, theta=replace(user.local.theta, jit=args.jit))
     robot, terrain = load_robot(args.robot), load_terrain(args.terrain)
+    user = _user_settings(args, robot)
+    settings = replace(user.local, theta=replace(user.local.theta, jit=args.jit))
     if args.print_config:
         local = PLANNERS[args.planner](robot, terrain, mu=user.mu, settings=settings)
         for name, value in effective(local, user.seed).items():
-            shown = ",".join(value) if isinstance(value, list) else f"{value:g}"
+            if value is None:
+                shown = "none"
+            elif isinstance(value, list):
+                shown = ",".join(value)
+            else:
+                shown = value if isinstance(value, str) else f"{value:g}"
             print(f"{name}: {shown}")
         return 0
     if args.goal is None and str(terrain.name).startswith(("gen:", "feat:")):
@@ -355,6 +362,11 @@ def build_parser() -> argparse.ArgumentParser:
     for st in SETTINGS:
         pl.add_argument(st.option, dest=_dest(st), help=f"{st.help}; YAML name {st.name}")
     pl.add_argument("--config", help="YAML file of settings (names as in --print-config)")
+    pl.add_argument(
+        "--preset",
+        help="named settings under --config and the options: fast (issue 16: two body "
+        "moves per crawl cycle, long strides on level ground, 1.5 m/s^2)",
+    )
     pl.add_argument(
         "--print-config", action="store_true", help="print the settings in force and exit"
     )

@@ -451,7 +451,7 @@ def run_feedback(
             # back off before giving a leg up: shorter steps over a more centred body (8.5's
             # ambitions); a failed body move leaves the robot standing where it was measured
             for frac, shrink in BACKOFF if step is None or not step.ok else ():
-                stride = local.stride_m() * step_scale[leg] * frac
+                stride = local.stride_at(state, leg, tau) * step_scale[leg] * frac
                 step = local.step(state, leg, tau, stride, shrink)
                 if step.ok:
                     break

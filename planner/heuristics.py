@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from planner.kinematics import kinematics_of
+from planner.stability import support_margin_m
 
 if TYPE_CHECKING:
     from planner.robot import Robot
@@ -38,6 +39,8 @@ __all__ = [
     "body_clearance_height_m",
     "reach_height_cap_m",
     "lambda_c",
+    "two_beat_xy_W",
+    "chebyshev_centre_xy",
     "lambda_t",
     "reference_directions",
     "body_pose_on_trajectory",
@@ -149,6 +152,7 @@ def lambda_c(
     shrink: float = 0.0,
     feet_plane_W: ArrayLike | None = None,
     heading_W: ArrayLike | None = None,
+    centre_xy_W: ArrayLike | None = None,
 ) -> _Array:
     """Body target r_c* = Lambda_c(Psi, i_f) (section 8.2.1, eq. 12).
 
@@ -182,6 +186,8 @@ def lambda_c(
         Footholds (contact points, one per leg) whose plane the body height follows.
     heading_W : array_like, shape (3,), optional
         The body's forward direction there (tau's u_f); default its current x axis.
+    centre_xy_W : array_like, shape (2,), optional
+        A horizontal point to lift instead of step 1's (e.g. :func:`two_beat_xy_W`).
 
     Returns
     -------
@@ -193,7 +199,9 @@ def lambda_c(
         raise ValueError(f"lambda_c: shrink must lie in [0, 1], got {shrink!r}")
     d_c = nominal_height_m(robot) if d_c_m is None else float(d_c_m)
     r = support_centroid_W(state, i_f)
-    if shrink > 0.0:
+    if centre_xy_W is not None:
+        r[:2] = np.asarray(centre_xy_W, float).reshape(2)
+    elif shrink > 0.0:
         r = (1.0 - shrink) * r + shrink * support_incentre_W(state, i_f)
     if feet_plane_W is not None:
         heading = state.base_rotation_W[:, 0] if heading_W is None else heading_W
@@ -203,6 +211,69 @@ def lambda_c(
     z = float(np.asarray(terrain.height(r[0], r[1]), dtype=float))
     z = max(z, float(support_centroid_W(state, i_f)[2]))  # over a gap: from the feet
     return np.array([r[0], r[1], z + d_c])
+
+
+def chebyshev_centre_xy(triangles_W: list[ArrayLike]) -> tuple[_Array, float]:
+    """(point, radius [m]) of the largest horizontal disc inside every triangle given.
+
+    The Chebyshev centre of the triangles' intersection in xy (a linear programme, scipy's
+    HiGHS): the point whose nearest edge is farthest. The radius is negative where the
+    triangles do not intersect (then the point is the least bad one); degenerate triangles
+    give (nan, -inf).
+    """
+    from scipy.optimize import linprog
+
+    rows, rhs = [], []
+    for tri in triangles_W:
+        xy = np.asarray(tri, dtype=float).reshape(3, 3)[:, :2]
+        e1, e2 = xy[1] - xy[0], xy[2] - xy[0]
+        area2 = e1[0] * e2[1] - e1[1] * e2[0]
+        if abs(area2) < 1e-12:
+            return np.full(2, np.nan), -np.inf
+        for a, b in ((0, 1), (1, 2), (2, 0)):
+            e = xy[b] - xy[a]
+            n = np.sign(area2) * np.array([-e[1], e[0]]) / float(np.linalg.norm(e))  # inward
+            rows.append([-n[0], -n[1], 1.0])  # n . (p - a) >= t
+            rhs.append(-float(n @ xy[a]))
+    res = linprog([0.0, 0.0, -1.0], A_ub=rows, b_ub=rhs, bounds=[(None, None)] * 3,
+                  method="highs")  # fmt: skip
+    if res.status != 0:
+        return np.full(2, np.nan), -np.inf
+    return np.asarray(res.x[:2], float), float(res.x[2])
+
+
+def two_beat_xy_W(
+    state: State,
+    i_f: int,
+    i_next: int,
+    swing_target_W: ArrayLike | None,
+    com_W: ArrayLike,
+    margin_m: float,
+) -> _Array | None:
+    """The horizontal COM target of a two-beat crawl before leg ``i_f`` swings, or None.
+
+    Beyond the paper's Lambda_c (the support centroid, eq. 12), which moves the body into
+    the middle of every support triangle: four body moves per crawl cycle, with the body
+    swaying back and forth between a hind and the following front swing. Here the body
+    stays where it is when the COM is already ``margin_m`` inside the triangle of the legs
+    other than ``i_f`` (the second swing of a pair); otherwise it moves to the point
+    deepest inside both that triangle and the next leg's ``i_next`` (with ``i_f`` on its
+    target ``swing_target_W``), so that the next swing needs no body move: two body moves
+    per cycle, each carrying the body across the support. None where neither applies (no
+    target known, or the two triangles share less than a ``margin_m`` disc): Lambda_c's.
+    """
+    feet = np.asarray(state.feet_W, dtype=float).reshape(4, 3)
+    com = np.asarray(com_W, dtype=float).reshape(3)
+    here = [i for i in range(4) if i != _check_leg(i_f)]
+    if support_margin_m(feet[here], com) >= margin_m:
+        return com[:2].copy()
+    if swing_target_W is None or int(i_next) == int(i_f):
+        return None
+    after = feet.copy()
+    after[i_f] = np.asarray(swing_target_W, dtype=float).reshape(3)
+    nxt = [i for i in range(4) if i != _check_leg(i_next)]
+    xy, radius = chebyshev_centre_xy([feet[here], after[nxt]])
+    return xy if radius >= margin_m else None
 
 
 def support_plane_W(points_W: ArrayLike) -> tuple[_Array, _Array]:

@@ -13,6 +13,9 @@ file (``stratawalk plan --config settings.yaml``) holds any of them::
     swing_overlap: 1.0      # share of a body move the next swing may overlap (0: none)
     clearance_m: 0.03       # swing height: the foot's lift above the terrain [m]
     theta.clearance_m: 0.03 # body clearance: the body box above the terrain [m]
+    com_target: two_beat    # body target before a swing (centroid: the paper's Lambda_c)
+    body_samples: 16        # samples of a body move
+    swing_samples: 24       # samples of a swing
     gait: [HL, FL, HR, FR]  # the crawl's leg order
     seed: 1
 
@@ -33,7 +36,16 @@ from planner.local.base import LocalSettings
 from planner.local.gait_queue import CRAWL
 from planner.robot import LEG_NAMES
 
-__all__ = ["SETTINGS", "Setting", "UserSettings", "effective", "load_config", "resolve"]
+__all__ = [
+    "PRESETS",
+    "SETTINGS",
+    "Setting",
+    "UserSettings",
+    "effective",
+    "load_config",
+    "preset",
+    "resolve",
+]
 
 
 @dataclass(frozen=True)
@@ -42,11 +54,12 @@ class Setting:
 
     name: str
     option: str
-    kind: str  # "float", "int" or "gait"
+    kind: str  # "float", "int", "gait" or "choice"
     help: str
     lo: float = 0.0
     hi: float = math.inf
     lo_open: bool = True
+    choices: tuple[str, ...] = ()
 
 
 SETTINGS: tuple[Setting, ...] = (
@@ -68,6 +81,18 @@ SETTINGS: tuple[Setting, ...] = (
         "theta.clearance_m", "--body-clearance", "float",
         "least height of the body box above the terrain [m]", 0.0, 0.5, lo_open=False,
     ),
+    Setting(
+        "com_target", "--com-target", "choice",
+        "body target before a swing: centroid (Lambda_c, eq. 12) or two_beat (two body moves "
+        "per cycle)", choices=("centroid", "two_beat"),
+    ),
+    Setting(
+        "level_stride", "--level-stride", "float",
+        "stride of Lambda_t over level ground, x leg reach (default: --step everywhere)",
+        0.0, 2.0,
+    ),
+    Setting("body_samples", "--body-samples", "int", "samples of a body move", 2, 1000, False),
+    Setting("swing_samples", "--swing-samples", "int", "samples of a swing", 4, 1000, False),
     Setting("gait", "--gait", "gait", "leg order of the crawl, e.g. HL,FL,HR,FR"),
     Setting("seed", "--seed", "int", "random seed (CMA-ES of --global, >= 1)", 1, 2**31 - 1, False),
     Setting("time_budget_s", "--time-budget", "float", "planning time budget [s]", 0.0, 1e6),
@@ -97,6 +122,10 @@ def _value(s: Setting, raw: Any, where: str) -> Any:
                 f"got {raw!r}"
             )
         return tuple(LEG_NAMES.index(n) for n in names)
+    if s.kind == "choice":
+        if str(raw) not in s.choices:
+            raise InputError(f"{where}: expected one of {', '.join(s.choices)}, got {raw!r}")
+        return str(raw)
     if isinstance(raw, bool) or raw is None:
         raise InputError(f"{where}: expected a number, got {raw!r}")
     if isinstance(raw, str):
@@ -123,6 +152,39 @@ def _value(s: Setting, raw: Any, where: str) -> Any:
             raise InputError(f"{where}: expected a whole number, got {raw!r}")
         return int(v)
     return v
+
+
+# Named settings (``stratawalk plan --preset NAME``), under a --config file and the options.
+# LittleDog's values; lengths (names ending in _m) scale with the robot's legs
+# (:func:`planner.robot_scale.length_scale`), accelerations do not (equal Froude numbers).
+PRESETS: dict[str, dict[str, Any]] = {
+    # issue 16, a walk nearly twice as fast that holds up in MuJoCo (bench/results/fast.md):
+    # two body moves per crawl cycle instead of four, a stride of 2/3 of the leg's reach
+    # where the ground is level (1.9x the default; steps and stairs keep the default's),
+    # body moves at 1.5 m/s^2 (the time law lowers it where friction or the zero-moment
+    # point's margin ask), a 2 cm swing height (the default's 3 cm less a third: the swing
+    # path already clears the highest ground under it), and samples fine enough for the
+    # time law's intervals
+    "fast": {
+        "com_target": "two_beat",
+        "level_stride": 0.67,
+        "body_accel_m_s2": 1.5,
+        "clearance_m": 0.02,
+        "body_samples": 16,
+        "swing_samples": 24,
+    },
+}
+
+
+def preset(name: str, length_scale: float = 1.0) -> dict[str, Any]:
+    """The checked settings of preset ``name``, lengths x ``length_scale`` (one-line errors)."""
+    if name not in PRESETS:
+        raise InputError(f"--preset: unknown preset {name!r}; known: {', '.join(PRESETS)}")
+    out = {}
+    for key, raw in PRESETS[name].items():
+        value = raw * length_scale if key.endswith("_m") else raw
+        out[key] = _value(_BY_NAME[key], value, f"--preset {name}: {key}")
+    return out
 
 
 def load_config(path: str | Path) -> dict[str, Any]:
@@ -158,7 +220,7 @@ def resolve(config: dict[str, Any] | None = None, options: dict[str, Any] | None
     for name, raw in (options or {}).items():
         if raw is not None:
             s = _BY_NAME[name]
-            if isinstance(raw, str) and s.kind != "gait":
+            if isinstance(raw, str) and s.kind not in ("gait", "choice"):
                 try:
                     raw = float(raw)
                 except ValueError:
@@ -193,6 +255,10 @@ def effective(planner: Any, seed: int = 1) -> dict:
         "swing_overlap": float(loc.swing_overlap),
         "clearance_m": float(loc.clearance_m or default_clearance_m(planner.robot)),
         "theta.clearance_m": float(loc.theta.clearance_m),
+        "com_target": str(loc.com_target),
+        "level_stride": None if loc.level_stride is None else float(loc.level_stride),
+        "body_samples": int(loc.body_samples),
+        "swing_samples": int(loc.swing_samples),
         "gait": [LEG_NAMES[i] for i in (loc.gait or CRAWL)],
         "seed": int(seed),
         "time_budget_s": float(loc.time_budget_s),

@@ -28,6 +28,7 @@ __all__ = [
     "polygon_margin_m",
     "support_margin_m",
     "support_margins_ca",
+    "tip_margin_m",
     "triangle_inradius_m",
 ]
 
@@ -70,6 +71,23 @@ def polygon_margin_m(feet_W: ArrayLike, com_W: ArrayLike) -> float:
         e = b - a
         out = min(out, _cross(e, p - a) / float(np.linalg.norm(e)))
     return float(out)
+
+
+def tip_margin_m(feet_W: ArrayLike, com_W: ArrayLike, gravity_W: ArrayLike) -> float:
+    """:func:`polygon_margin_m` of the COM projected along ``gravity_W`` onto the feet's height.
+
+    With the gravito-inertial vector g - a (d'Alembert) in place of g, the projected point
+    is the zero-moment point of a body accelerating by ``a`` (its angular momentum
+    neglected): its margin says how far the motion is from tipping the robot over an edge
+    of its support, as the COM's own margin does at rest.
+    """
+    feet = np.asarray(feet_W, dtype=float).reshape(-1, 3)
+    c = np.asarray(com_W, dtype=float).reshape(3)
+    g = np.asarray(gravity_W, dtype=float).reshape(3)
+    if g[2] >= 0.0:
+        return -np.inf  # no downward load: nothing holds the feet on the ground
+    t = (float(feet[:, 2].mean()) - c[2]) / g[2]
+    return polygon_margin_m(feet, c + t * g)
 
 
 def nearest_inside_point_W(feet_W: ArrayLike, p_W: ArrayLike, margin_m: float):

@@ -219,6 +219,13 @@ def test_job_list(tmp_path):
                              planner="recursive")  # fmt: skip
     assert later[0]["planner"] == "soft" and recursive[0]["planner"] == "recursive"
     assert job_id(recursive[0]) != job_id(later[0])
+    # --preset: the settings of every job, part of its id only when not the defaults
+    fast = physics_jobs(courses=(), generated=1, first_seed=7, out_dir=tmp_path,
+                        preset="fast")  # fmt: skip
+    assert later[0]["preset"] == "default" and job_id(fast[0]) != job_id(later[0])
+    old = dict(later[0])
+    del old["preset"]  # a record written before presets keeps its id
+    assert job_id(old) == job_id(later[0])
 
 
 def test_planned_only_skips_a_plan_that_did_not_reach(tmp_path):
@@ -247,6 +254,7 @@ def test_planned_only_skips_a_plan_that_did_not_reach(tmp_path):
         (["--courses", "gen:x"], "gen:SEED"),
         (["--time-budget", "0"], "--time-budget"),
         (["--workers", "0"], "--workers"),
+        (["--preset", "quick"], "--preset"),
     ],
 )
 def test_cli_bad_options_are_one_line_errors(args, option, tmp_path, capsys):

@@ -96,3 +96,46 @@ def test_plan_records_its_settings_and_friction(tmp_path, capsys):
               if plan.samples.contact[k - 1, i] and not plan.samples.contact[k, i]]  # fmt: skip
     assert lifted[:4] == [0, 3, 1, 2]  # the gait order asked for
     assert check_plan(plan).ok
+
+
+def test_preset_under_config_and_options(tmp_path, capsys):
+    """--preset fast fills the settings; a --config file and the options override it."""
+    cfg = tmp_path / "s.yaml"
+    cfg.write_text("body_accel_m_s2: 1.0\n")
+    rc = main(["plan", "--terrain", "flat", "--preset", "fast", "--config", str(cfg),
+               "--swing-samples", "20", "--print-config"])  # fmt: skip
+    out = capsys.readouterr().out
+    assert rc == 0
+    lines = dict(line.split(": ", 1) for line in out.strip().splitlines())
+    assert lines["com_target"] == "two_beat" and lines["level_stride"] == "0.67"
+    assert lines["body_accel_m_s2"] == "1" and lines["swing_samples"] == "20"
+    assert lines["clearance_m"] == "0.02" and lines["body_samples"] == "16"
+
+
+def test_preset_lengths_scale_with_the_robot():
+    from planner.settings import PRESETS, preset
+
+    got = preset("fast", 2.0)
+    assert got["clearance_m"] == pytest.approx(2.0 * PRESETS["fast"]["clearance_m"])
+    assert got["body_accel_m_s2"] == PRESETS["fast"]["body_accel_m_s2"]  # Froude: unscaled
+
+
+@pytest.mark.parametrize(
+    "argv, expect",
+    [
+        (["--preset", "quick"], "--preset: unknown preset 'quick'; known: fast"),
+        (["--com-target", "middle"], "--com-target: expected one of centroid, two_beat"),
+        (["--body-samples", "1"], "--body-samples: must be a finite number >= 2"),
+    ],
+)
+def test_bad_preset_or_choice_is_one_line(capsys, argv, expect):
+    rc = main(["plan", "--terrain", "flat", "--goal", "1,0", *argv])
+    err = _one_line_error(capsys)
+    assert rc == 2 and expect in err, err
+
+
+def test_config_com_target_is_checked(tmp_path):
+    cfg = tmp_path / "s.yaml"
+    cfg.write_text("com_target: 3\n")
+    with pytest.raises(InputError, match="com_target: expected one of centroid, two_beat"):
+        load_config(cfg)

@@ -239,3 +239,45 @@ def test_feedback_replans_with_the_settings_the_plan_was_made_with():
     st = _planned_settings(plan)
     assert (st.body_accel_m_s2, st.swing_time_s, tuple(st.gait)) == (0.2, 0.7, (0, 3, 1, 2))
     assert st.step_m == pytest.approx(plan.stats["settings"]["step_m"])
+
+
+def test_a_move_braking_toward_an_edge_keeps_the_zero_moment_point_inside(littledog):
+    """An arrival move on four feet to a COM 25 mm inside the support polygon's front edge,
+    at a 1.5 m/s^2 cap: braking, the law slows down (it tipped the robot over that edge in
+    MuJoCo at the cap), and at every sample the zero-moment point, computed here by hand
+    (COM - h a / g on flat ground), stays inside by the floor the law asks."""
+    from dataclasses import replace
+
+    from planner.local.soft import SoftPlanner
+    from planner.stability import PATH_BALANCE_MARGIN_M, polygon_margin_m
+    from planner.terrain import load_terrain
+    from planner.time_law import CARRIED_SHARE
+    from planner.trajectory import Trajectory
+
+    flat = load_terrain("flat")
+    planner = SoftPlanner(littledog, flat)
+    planner.settings = replace(planner.settings, body_accel_m_s2=1.5)
+    tau = Trajectory.straight((0.3, 0.0), (1.3, 0.0), flat, planner.com_height_m())
+    state = planner.initial_state((0.3, 0.0), tau)
+    front = float(state.feet_W[:2, 0].min())  # the front feet's edge
+    moved = planner.arrival(state, (front - 0.005, 0.0), tau, nearest=True)
+    assert moved is not None
+    _, path = moved
+    t = np.concatenate([[0.0], planner.body_offsets_s(path)])
+    com = np.array([planner.check.com_W(s) for s in path])
+    ell = np.linalg.norm(np.diff(com, axis=0), axis=1)
+    v = [0.0]
+    for length, dt in zip(ell, np.diff(t), strict=True):
+        v.append(2.0 * length / dt - v[-1])
+    v = np.array(v)
+    acc = (v[1:] ** 2 - v[:-1] ** 2) / (2.0 * np.maximum(ell, 1e-12))
+    assert acc.min() > -1.5 * (1 - 1e-3)  # braking below the cap somewhere
+    feet = path[-1].feet_W
+    for k, a in enumerate(acc):
+        u = (com[k + 1] - com[k]) / max(np.linalg.norm(com[k + 1] - com[k]), 1e-12)
+        for j in (k, k + 1):
+            h = com[j][2] - feet[:, 2].mean()
+            rest = polygon_margin_m(feet, com[j])
+            floor = min(rest, max(CARRIED_SHARE * rest, PATH_BALANCE_MARGIN_M))
+            zmp = com[j] - h * a * u / 9.81
+            assert polygon_margin_m(feet, zmp) >= floor - 2e-4, (k, j)

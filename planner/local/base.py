@@ -36,6 +36,8 @@ from planner.heuristics import (
     reference_directions,
     safe_foothold,
     support_body_target_W,
+    support_plane_W,
+    two_beat_xy_W,
 )
 from planner.interpolate import (
     BETWEEN_SAMPLES_RAD,
@@ -98,6 +100,15 @@ TORQUE_FRACTION = COMMANDED_TORQUE_FRACTION
 START_SLACK_M = 1e-4
 PROGRESS_M = 0.01  # the COM coming this much nearer the goal counts as progress
 ARRIVAL_M = 0.01  # a walk ending within goal_tol_m but farther than this tries the arrival
+# com_target "two_beat": the COM stays put, or moves to the deepest point of two supports,
+# where it is this far inside (Theta2's own margin, BALANCE_MARGIN_M, and 5 mm to spare for
+# the pose Theta2 finds near the target)
+TWO_BEAT_MARGIN_M = BALANCE_MARGIN_M + 0.005
+# stride_at: the ground under a long stride counts as level within these
+LEVEL_TOL_M = 0.005  # heights off the feet's plane [m]
+LEVEL_SLOPE = 0.09  # the feet's plane's gradient (5 degrees)
+LEVEL_WIDTH_M = 0.03  # the swing track's half width [m]
+LEVEL_GRID_M = 0.01  # spacing of the heights sampled [m]
 MAX_START_TORQUE_FRACTION = 0.9  # ... but never past this (nor below zero clearance):
 # without the bounds, each path could lose a little more than the last (a ratchet)
 
@@ -124,6 +135,16 @@ class LocalSettings:
         which the planner is stuck (steps in place before an obstacle, some failing).
     follow_support : the body's height and tilt follow the plane of the footholds it will
         stand on (issue 15 item 2); False: the paper's, over the terrain under the body.
+    com_target : where the body moves before a swing: "centroid", Lambda_c's (eq. 12, the
+        paper's, four body moves per crawl cycle) or "two_beat" (issue 16,
+        :func:`planner.heuristics.two_beat_xy_W`: into both the swing's and the next
+        swing's support, two body moves per cycle).
+    level_stride : the stride of Lambda_t where the ground a swing crosses is level
+        (:meth:`LocalPlanner.stride_at`), as a fraction of the shortest leg reach; used
+        where longer than ``step_m``. None: ``step_m`` everywhere.
+    body_samples, swing_samples : samples of a body move's leaf and of a swing path. The
+        time law is exact at the samples only (each interval at constant acceleration):
+        long moves and swings run faster, and overlap more, with more of them.
     """
 
     gait: tuple[int, ...] = CRAWL
@@ -144,6 +165,8 @@ class LocalSettings:
     no_progress_cycles: int = 32
     balance_margin_frac: float = 0.01
     follow_support: bool = True
+    com_target: str = "centroid"
+    level_stride: float | None = None
     theta: ThetaOptions = field(default_factory=ThetaOptions)
 
 
@@ -311,8 +334,9 @@ class LocalPlanner:
         return self._theta3[leg]
 
     def _count(self, key: str, ok: bool) -> None:
-        self.stats[key][0] += 1
-        self.stats[key][1] += int(ok)
+        counts = self.stats.setdefault(key, [0, 0])  # theta2_held: only where two-beat
+        counts[0] += 1
+        counts[1] += int(ok)
 
     def com_height_m(self) -> float:
         """Nominal height of the whole-body COM above the terrain [m]."""
@@ -422,7 +446,15 @@ class LocalPlanner:
         heading = None
         if tau is not None:
             heading = tau.tangent(tau.closest_lambda(state.base_position_W))
-        rc = lambda_c(self.robot, self.terrain, state, leg, self.com_height_m(), k, feet, heading)
+        centre = None
+        if self.settings.com_target == "two_beat":
+            centre = two_beat_xy_W(
+                state, leg, self._next_leg(leg), swing_target_W, self.check.com_W(state),
+                TWO_BEAT_MARGIN_M,
+            )  # fmt: skip
+        rc = lambda_c(
+            self.robot, self.terrain, state, leg, self.com_height_m(), k, feet, heading, centre
+        )
         if feet is None or tau is None:
             return rc
         return self.sunk_target(state, leg, rc, tau, swing_target_W, heading)
@@ -514,6 +546,10 @@ class LocalPlanner:
         rc = self.body_target(state, leg, shrink, swing_target_W, tau)
         u_f, u_n = self.body_directions(tau, state, rc, leg, swing_target_W)
         landing = swing_target_W is not None
+        if self._holds_here(state, leg):
+            held = self._held(state, support, rc, u_f, u_n, swing_target_W)
+            if held is not None:
+                return held
         sol = self.theta2(support, landing).solve(state, rc, u_f, u_n, swing_target_W, hint)
         self._count("theta2", sol.feasible)
         if not sol.feasible:
@@ -533,6 +569,40 @@ class LocalPlanner:
         if land is not None:
             sol.state.info["landing"] = land
         return sol, path
+
+    def _holds_here(self, state: State, leg: int) -> bool:
+        """Whether the two-beat crawl keeps the body still before ``leg`` swings.
+
+        With ``com_target`` "two_beat", where the COM stands ``TWO_BEAT_MARGIN_M`` inside
+        the triangle of the other three feet already (the second swing of a pair).
+        """
+        if self.settings.com_target != "two_beat":
+            return False
+        sup = [i for i in range(4) if i != leg]
+        com = self.check.com_W(state)
+        return support_margin_m(state.feet_W[sup], com) >= TWO_BEAT_MARGIN_M
+
+    def _held(self, state: State, support, rc, u_f, u_n, swing_target_W):
+        """(solution, samples) of a body move that stays where it is, or None.
+
+        :meth:`planner.problems.theta2.Theta2.hold`: the start passes Theta2's checks on
+        three legs; the path is the start twice (a move of no length, no time).
+        """
+        held = self.theta2(support, swing_target_W is not None).hold(
+            state, rc, u_f, u_n, swing_target_W
+        )
+        self._count("theta2_held", held.feasible)
+        if not held.feasible:
+            return None
+        held.state.support = support
+        path = [state, held.state]
+        if self.path_problem(path):
+            return None
+        land = held.state.info.get("landing")
+        held.state = self.path_end(path, support)
+        if land is not None:
+            held.state.info["landing"] = land
+        return held, path
 
     def body_path(self, state: State, sol, again, u_f, u_n):
         """(solution, samples, why) of the body move from ``state`` to ``sol.state``.
@@ -975,6 +1045,41 @@ class LocalPlanner:
         st = self.settings
         return st.step_m if st.step_m is not None else 0.35 * float(np.min(self.robot.reach_m))
 
+    def stride_at(self, state: State, leg: int, tau: Trajectory) -> float:
+        """The stride of ``leg``'s next step [m]: ``level_stride`` x reach on level ground.
+
+        Elsewhere, and without ``level_stride``, :meth:`stride_m`. Level: the terrain
+        (sharp heights, every ``LEVEL_GRID_M``) under the swing's track from the foot to the
+        long stride's target, widened by ``LEVEL_WIDTH_M`` each side, and under the stance
+        feet lies within ``LEVEL_TOL_M`` of the plane of the four feet, and that plane is
+        within ``LEVEL_SLOPE`` of horizontal. A long stride
+        stretches the legs between the feet: on steps, stairs and slopes that left stances
+        the servos could not hold on three legs (step5cm and stairs stalled with 12 cm
+        strides everywhere), on level ground it halves the steps of a walk.
+        """
+        short = self.stride_m()
+        if self.settings.level_stride is None:
+            return short
+        long = self.settings.level_stride * float(np.min(self.robot.reach_m))
+        if long <= short:
+            return short
+        feet = np.asarray(state.feet_W, float).reshape(4, 3)
+        grad, centre = support_plane_W(feet)
+        if float(np.linalg.norm(grad)) > LEVEL_SLOPE:
+            return short
+        target = self.stride_target(state, leg, tau, long)
+        a, b = feet[leg, :2], np.asarray(target, float)[:2]
+        along = b - a
+        n = max(int(np.ceil(np.linalg.norm(along) / LEVEL_GRID_M)), 1)
+        side = np.array([-along[1], along[0]]) / max(float(np.linalg.norm(along)), 1e-9)
+        offsets = np.arange(-LEVEL_WIDTH_M, LEVEL_WIDTH_M + 1e-9, LEVEL_GRID_M)
+        pts = a + np.linspace(0.0, 1.0, n + 1)[:, None, None] * along
+        pts = (pts + offsets[None, :, None] * side).reshape(-1, 2)
+        pts = np.vstack([pts, feet[:, :2]])
+        z = np.asarray(self.terrain.height_sharp(pts[:, 0], pts[:, 1]), float).reshape(-1)
+        plane = centre[2] + (pts - centre[:2]) @ grad
+        return long if float(np.max(np.abs(z - plane))) <= LEVEL_TOL_M else short
+
     def step(
         self,
         state: State,
@@ -1375,8 +1480,18 @@ class LocalPlanner:
         contact feet with gravity g - a u (u the COM's direction over the interval;
         d'Alembert's inertial force, eq. 4), minus the margin that must remain: the
         path's own (``balance_margin_frac``) or ``CARRIED_SHARE`` of the sample's static
-        margin, whichever is more. >= 0: the stance carries the motion.
+        margin, whichever is more; and the zero-moment point, the COM projected along
+        g - a u (:func:`planner.stability.tip_margin_m`), inside the support polygon by
+        ``CARRIED_SHARE`` of the COM's own tip margin at rest, or by
+        ``PATH_BALANCE_MARGIN_M`` where that is more (at most the margin at rest): the
+        friction margin stays wide while the far feet unload, and an arrival move braking
+        at 1.5 m/s^2 toward an edge 2.9 cm from its COM (the ZMP 6 mm from it) tipped the
+        robot over it in MuJoCo, as no swing keeping 21 mm ever did
+        (:mod:`planner.stability`). The tip part counts in N as the horizontal force that
+        would use what is left of it (m g x margin / COM height).
+        >= 0: the stance carries the motion.
         """
+        from planner.stability import tip_margin_m
         from planner.statics import GRAVITY_W, static_feasibility
         from planner.time_law import CARRIED_SHARE
 
@@ -1397,6 +1512,10 @@ class LocalPlanner:
             return float(res.margin_N) if np.isfinite(res.margin_N) else -np.inf
 
         floors: dict[int, float] = {}
+        tip_floors: dict[int, tuple[float, float]] = {}
+
+        def tip(j: int, g) -> float:
+            return tip_margin_m(path[j].feet_W[path[j].in_contact], com[j], g)
 
         def margin(k: int, a: float) -> float:
             out = np.inf
@@ -1405,7 +1524,14 @@ class LocalPlanner:
                     still = path[j].info.get("margin_N")
                     still = raw(j, g_W) if still is None else still
                     floors[j] = max(need, CARRIED_SHARE * still)
-                out = min(out, raw(j, g_W - a * u[k]) - floors[j])
+                    feet = path[j].feet_W[path[j].in_contact]
+                    height = max(float(com[j][2] - feet[:, 2].mean()), 1e-3)
+                    tip0 = max(tip(j, g_W), 0.0)
+                    floor = min(tip0, max(CARRIED_SHARE * tip0, PATH_BALANCE_MARGIN_M))
+                    tip_floors[j] = (floor, m * 9.81 / height)
+                g = g_W - a * u[k]
+                floor, per_m = tip_floors[j]
+                out = min(out, raw(j, g) - floors[j], (tip(j, g) - floor) * per_m)
             return out
 
         return margin

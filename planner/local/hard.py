@@ -238,7 +238,9 @@ class HardPlanner(SoftPlanner):
         paper's plain pose (no swing-ready constraint) when the foothold's fails.
         ``shrink`` and ``hint`` (Lambda_c's and Theta2's) do not apply.
         """
-        found, lam = self.search_body(state, leg, tau, self.stride_m(), swing_target_W)
+        found, lam = self.search_body(
+            state, leg, tau, self.stride_at(state, leg, tau), swing_target_W
+        )
         if lam is None:
             sol = found
             sol.diagnosis = f"Omega_1: {sol.diagnosis}"

@@ -117,7 +117,8 @@ class RecursivePlanner(LocalPlanner):
                     raise _Budget
                 win.attempts += 1
                 run.cycles += 1
-                step = self.step(walk.state, leg, run.tau, self.stride_m() * rho3, rho2)
+                stride = self.stride_at(walk.state, leg, run.tau)
+                step = self.step(walk.state, leg, run.tau, stride * rho3, rho2)
                 if not step.ok:
                     self.failed(run, step)
                     continue

@@ -77,7 +77,9 @@ class SoftPlanner(LocalPlanner):
             mark = walk.mark()
             before = tuple(queue)
             leg = queue.pop()
-            step = self.step(walk.state, leg, run.tau, self.stride_m() * step_scale[leg])
+            step = self.step(
+                walk.state, leg, run.tau, self.stride_at(walk.state, leg, run.tau) * step_scale[leg]
+            )
             walk.add(step)  # a failed placement keeps its body move
             if not step.ok:
                 self.failed(run, step)

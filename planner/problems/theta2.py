@@ -493,6 +493,49 @@ class Theta2(ThetaProblem):
             sol.state.info["landing"] = (np.asarray(swing_target_W, float).copy(), land)
         return sol
 
+    def hold(self, start: State, rc_star_W, u_f, u_n, swing_target_W=None) -> ThetaSolution:
+        """Theta2's constraints at ``start`` itself: the body stays where it stands.
+
+        Beyond the paper (issue 16's two-beat crawl, :func:`planner.heuristics.two_beat_xy_W`):
+        where the COM already stands inside the three legs' triangle with margin, the
+        optimum lies millimetres away, and a move of millimetres is a rest-to-rest body
+        move all the same (0.08 s at 1.5 m/s^2). The start's pose and joints are checked
+        with the independent tests of every solution (reach, contact, joint limits,
+        clearance, forces, balance margin, torque, sway stiffness, swing- and
+        landing-ready; the landing joints by IK of the swing target); ``feasible`` when
+        they all hold. No IPOPT solve; the objective is the start's.
+        """
+        p = self.params(start, rc_star_W, u_f, u_n, swing_target_W)
+        x = self.initial_guess(start, p)  # s1, s2, s5 and the landing joints
+        x[self._x_slices["p"]] = start.base_position_W
+        x[self._x_slices["phi"]] = coords_from_pose(
+            np.column_stack([start.base_rotation_W, start.base_position_W])
+        )[3:]
+        x[self._x_slices["theta"]] = np.asarray(start.joints_rad, float).ravel()
+        state = self._state_from_x(x, p)
+        violations = self._violations(state, x, p)
+        worst = max(violations.values(), default=0.0)
+        feasible = bool(np.isfinite(worst) and worst <= FEASIBILITY_TOL)
+        state.info["rc_star"] = np.asarray(rc_star_W, float)
+        if self.landing:
+            land = self.x_block(x, "theta_land").copy()
+            state.info["landing"] = (np.asarray(swing_target_W, float).copy(), land)
+        return ThetaSolution(
+            problem=self.name,
+            status="held",
+            feasible=feasible,
+            state=state,
+            objective=self.objective_at(x, p),
+            objective_terms={},
+            iterations=0,
+            solve_time_s=0.0,
+            build_time_s=self.build_time_s,
+            diagnosis="" if feasible else self._diagnose("held", violations),
+            violations=violations,
+            x=x,
+            p=p,
+        )
+
     def _solve_sibling(
         self, sol: ThetaSolution, p: np.ndarray, aim: float | None = None
     ) -> ThetaSolution:
