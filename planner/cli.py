@@ -364,8 +364,8 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--config", help="YAML file of settings (names as in --print-config)")
     pl.add_argument(
         "--preset",
-        help="named settings under --config and the options: fast (issue 16: two body "
-        "moves per crawl cycle, long strides on level ground, 1.5 m/s^2)",
+        help="named settings under --config and the options: fast (issue 16: on level "
+        "ground two body moves per crawl cycle, long strides, 1.5 m/s^2, 2 cm swings)",
     )
     pl.add_argument(
         "--print-config", action="store_true", help="print the settings in force and exit"

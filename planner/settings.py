@@ -91,6 +91,15 @@ SETTINGS: tuple[Setting, ...] = (
         "stride of Lambda_t over level ground, x leg reach (default: --step everywhere)",
         0.0, 2.0,
     ),
+    Setting(
+        "level_body_accel_m_s2", "--level-body-accel", "float",
+        "acceleration bound of body moves over level ground [m/s^2] (default: --body-accel)",
+        0.0, 10.0,
+    ),
+    Setting(
+        "level_clearance_m", "--level-swing-height", "float",
+        "swing height over level ground [m] (default: --swing-height)", 0.0, 0.5,
+    ),
     Setting("body_samples", "--body-samples", "int", "samples of a body move", 2, 1000, False),
     Setting("swing_samples", "--swing-samples", "int", "samples of a swing", 4, 1000, False),
     Setting("gait", "--gait", "gait", "leg order of the crawl, e.g. HL,FL,HR,FR"),
@@ -158,22 +167,27 @@ def _value(s: Setting, raw: Any, where: str) -> Any:
 # LittleDog's values; lengths (names ending in _m) scale with the robot's legs
 # (:func:`planner.robot_scale.length_scale`), accelerations do not (equal Froude numbers).
 PRESETS: dict[str, dict[str, Any]] = {
-    # issue 16, a walk nearly twice as fast that holds up in MuJoCo (bench/results/fast.md):
-    # two body moves per crawl cycle instead of four, a stride of 2/3 of the leg's reach
-    # where the ground is level (1.9x the default; steps and stairs keep the default's),
-    # body moves at 1.5 m/s^2 (the time law lowers it where friction or the zero-moment
-    # point's margin ask), a 2 cm swing height (the default's 3 cm less a third: the swing
-    # path already clears the highest ground under it), and samples fine enough for the
-    # time law's intervals
+    # issue 16, a walk nearly twice as fast on level ground that holds up in MuJoCo
+    # (bench/results/speed.md), as careful as the defaults elsewhere: where the ground
+    # under the feet (the swing's track) is level, two body moves per crawl cycle instead
+    # of four, a stride of 2/3 of the leg's reach (1.9x the default), body moves at
+    # 1.5 m/s^2 (the time law lowers it where friction or the zero-moment point ask) and a
+    # 2 cm swing height; everywhere, samples fine enough for the time law's intervals.
+    # The same everywhere planned 12 of the 17 named and hard courses, not 16, and
+    # stairs_down fell with feedback (bench/results/physics_fast.md).
     "fast": {
         "com_target": "two_beat",
         "level_stride": 0.67,
-        "body_accel_m_s2": 1.5,
-        "clearance_m": 0.02,
+        "level_body_accel_m_s2": 1.5,
+        "level_clearance_m": 0.02,
         "body_samples": 16,
         "swing_samples": 24,
     },
 }
+
+
+def _float_or_none(v) -> float | None:
+    return None if v is None else float(v)
 
 
 def preset(name: str, length_scale: float = 1.0) -> dict[str, Any]:
@@ -257,6 +271,8 @@ def effective(planner: Any, seed: int = 1) -> dict:
         "theta.clearance_m": float(loc.theta.clearance_m),
         "com_target": str(loc.com_target),
         "level_stride": None if loc.level_stride is None else float(loc.level_stride),
+        "level_body_accel_m_s2": _float_or_none(loc.level_body_accel_m_s2),
+        "level_clearance_m": _float_or_none(loc.level_clearance_m),
         "body_samples": int(loc.body_samples),
         "swing_samples": int(loc.swing_samples),
         "gait": [LEG_NAMES[i] for i in (loc.gait or CRAWL)],

@@ -101,23 +101,24 @@ def test_plan_records_its_settings_and_friction(tmp_path, capsys):
 def test_preset_under_config_and_options(tmp_path, capsys):
     """--preset fast fills the settings; a --config file and the options override it."""
     cfg = tmp_path / "s.yaml"
-    cfg.write_text("body_accel_m_s2: 1.0\n")
+    cfg.write_text("level_body_accel_m_s2: 1.0\n")
     rc = main(["plan", "--terrain", "flat", "--preset", "fast", "--config", str(cfg),
                "--swing-samples", "20", "--print-config"])  # fmt: skip
     out = capsys.readouterr().out
     assert rc == 0
     lines = dict(line.split(": ", 1) for line in out.strip().splitlines())
     assert lines["com_target"] == "two_beat" and lines["level_stride"] == "0.67"
-    assert lines["body_accel_m_s2"] == "1" and lines["swing_samples"] == "20"
-    assert lines["clearance_m"] == "0.02" and lines["body_samples"] == "16"
+    assert lines["level_body_accel_m_s2"] == "1" and lines["swing_samples"] == "20"
+    assert lines["level_clearance_m"] == "0.02" and lines["body_samples"] == "16"
+    assert lines["body_accel_m_s2"] == "0.5" and lines["clearance_m"] == "0.029981"
 
 
 def test_preset_lengths_scale_with_the_robot():
     from planner.settings import PRESETS, preset
 
     got = preset("fast", 2.0)
-    assert got["clearance_m"] == pytest.approx(2.0 * PRESETS["fast"]["clearance_m"])
-    assert got["body_accel_m_s2"] == PRESETS["fast"]["body_accel_m_s2"]  # Froude: unscaled
+    assert got["level_clearance_m"] == pytest.approx(2.0 * PRESETS["fast"]["level_clearance_m"])
+    assert got["level_body_accel_m_s2"] == PRESETS["fast"]["level_body_accel_m_s2"]  # Froude
 
 
 @pytest.mark.parametrize(

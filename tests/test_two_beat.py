@@ -241,3 +241,36 @@ def test_long_strides_only_over_level_ground(littledog):
     plain = SoftPlanner(littledog, flat)
     tau = Trajectory.straight((0.3, 0.0), (1.3, 0.0), flat, plain.com_height_m())
     assert plain.stride_at(plain.initial_state((0.3, 0.0), tau), 0, tau) == plain.stride_m()
+
+
+def test_fast_settings_apply_over_level_ground_only(littledog):
+    """Where the ground under the feet is not level (step5cm's step between the front and
+    hind feet) the two-beat target is Lambda_c's and the body accelerates at the default
+    bound; on flat ground the two-beat's and the level bound."""
+    from dataclasses import replace
+
+    from planner.local.soft import SoftPlanner
+    from planner.terrain import load_terrain
+    from planner.trajectory import Trajectory
+
+    fast = LocalSettings(com_target="two_beat", level_body_accel_m_s2=1.5, level_clearance_m=0.02)
+    for name, x, level in (("flat", 0.3, True), ("step5cm", 0.75, False)):
+        terrain = load_terrain(name)
+        planner = SoftPlanner(littledog, terrain, settings=fast)
+        paper = SoftPlanner(littledog, terrain)
+        tau = Trajectory.straight((x, 0.0), (x + 1.0, 0.0), terrain, planner.com_height_m())
+        state = planner.initial_state((x, 0.0), tau)
+        assert planner.level_under(state) is level
+        target = np.array([x - 0.03, 0.07, 0.0])  # HL's next foothold
+        target[2] = float(terrain.height(target[0], target[1]))
+        got = planner.body_target(state, 2, swing_target_W=target, tau=tau)
+        want = paper.body_target(state, 2, swing_target_W=target, tau=tau)
+        assert bool(np.linalg.norm(got[:2] - want[:2]) > 1e-3) is level
+        step = paper.step(state, 2, tau, paper.stride_m())
+        assert step.ok, step.diagnosis
+        path = step.body_path
+        planner.settings = replace(planner.settings, body_accel_m_s2=0.5)
+        quick, slow = planner.body_offsets_s(path)[-1], paper.body_offsets_s(path)[-1]
+        assert (quick < 0.8 * slow) if level else quick == pytest.approx(slow)
+        clear = planner.swing_clearance_m(step.moved, 2, step.end.feet_W[2])
+        assert clear == (0.02 if level else pytest.approx(0.029981, abs=1e-6))

@@ -36,7 +36,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
-from planner.interpolate import default_clearance_m, swing_path
+from planner.interpolate import swing_path
 from planner.lie import interpolate_coords, pose_from_coords
 from planner.rolling import leg_rotations_W, roll_stance_feet, sliding
 from planner.stability import BALANCE_MARGIN_M, support_margin_m
@@ -274,7 +274,7 @@ def overlap_step(planner: LocalPlanner, step: Step) -> Overlap | None:
     swing_alone = np.concatenate([[0.0], planner.swing_offsets_s(swing, leg)])
     n = len(body)
     first = _earliest_lift(planner, body, leg)
-    clearance = planner.settings.clearance_m or default_clearance_m(planner.robot)
+    clearance = planner.swing_clearance_m(step.moved, leg, step.end.feet_W[leg])
     for lift in range(first, n - 1):
         timing = body[:lift] + [_lifted_copy(s, leg) for s in body[lift:]]
         body_t = np.concatenate([[0.0], planner.body_offsets_s(timing)])
