@@ -100,6 +100,14 @@ SETTINGS: tuple[Setting, ...] = (
         "level_clearance_m", "--level-swing-height", "float",
         "swing height over level ground [m] (default: --swing-height)", 0.0, 0.5,
     ),
+    Setting(
+        "level_body_samples", "--level-body-samples", "int",
+        "samples of a body move over level ground (default: --body-samples)", 2, 1000, False,
+    ),
+    Setting(
+        "level_swing_samples", "--level-swing-samples", "int",
+        "samples of a swing over level ground (default: --swing-samples)", 4, 1000, False,
+    ),
     Setting("body_samples", "--body-samples", "int", "samples of a body move", 2, 1000, False),
     Setting("swing_samples", "--swing-samples", "int", "samples of a swing", 4, 1000, False),
     Setting("gait", "--gait", "gait", "leg order of the crawl, e.g. HL,FL,HR,FR"),
@@ -172,22 +180,27 @@ PRESETS: dict[str, dict[str, Any]] = {
     # under the feet (the swing's track) is level, two body moves per crawl cycle instead
     # of four, a stride of 2/3 of the leg's reach (1.9x the default), body moves at
     # 1.5 m/s^2 (the time law lowers it where friction or the zero-moment point ask) and a
-    # 2 cm swing height; everywhere, samples fine enough for the time law's intervals.
-    # The same everywhere planned 12 of the 17 named and hard courses, not 16, and
-    # stairs_down fell with feedback (bench/results/physics_fast.md).
+    # 2 cm swing height, and samples fine enough for the time law's intervals. The same
+    # everywhere planned 12 of the 17 named and hard courses, not 16, and stairs_down fell
+    # with feedback (bench/results/physics_fast_everywhere.md); with the samples
+    # everywhere, 9 (incline18 stalled).
     "fast": {
         "com_target": "two_beat",
         "level_stride": 0.67,
         "level_body_accel_m_s2": 1.5,
         "level_clearance_m": 0.02,
-        "body_samples": 16,
-        "swing_samples": 24,
+        "level_body_samples": 16,
+        "level_swing_samples": 24,
     },
 }
 
 
 def _float_or_none(v) -> float | None:
     return None if v is None else float(v)
+
+
+def _int_or_none(v) -> int | None:
+    return None if v is None else int(v)
 
 
 def preset(name: str, length_scale: float = 1.0) -> dict[str, Any]:
@@ -273,6 +286,8 @@ def effective(planner: Any, seed: int = 1) -> dict:
         "level_stride": None if loc.level_stride is None else float(loc.level_stride),
         "level_body_accel_m_s2": _float_or_none(loc.level_body_accel_m_s2),
         "level_clearance_m": _float_or_none(loc.level_clearance_m),
+        "level_body_samples": _int_or_none(loc.level_body_samples),
+        "level_swing_samples": _int_or_none(loc.level_swing_samples),
         "body_samples": int(loc.body_samples),
         "swing_samples": int(loc.swing_samples),
         "gait": [LEG_NAMES[i] for i in (loc.gait or CRAWL)],

@@ -103,13 +103,14 @@ def test_preset_under_config_and_options(tmp_path, capsys):
     cfg = tmp_path / "s.yaml"
     cfg.write_text("level_body_accel_m_s2: 1.0\n")
     rc = main(["plan", "--terrain", "flat", "--preset", "fast", "--config", str(cfg),
-               "--swing-samples", "20", "--print-config"])  # fmt: skip
+               "--level-swing-samples", "20", "--print-config"])  # fmt: skip
     out = capsys.readouterr().out
     assert rc == 0
     lines = dict(line.split(": ", 1) for line in out.strip().splitlines())
     assert lines["com_target"] == "two_beat" and lines["level_stride"] == "0.67"
-    assert lines["level_body_accel_m_s2"] == "1" and lines["swing_samples"] == "20"
-    assert lines["level_clearance_m"] == "0.02" and lines["body_samples"] == "16"
+    assert lines["level_body_accel_m_s2"] == "1" and lines["level_swing_samples"] == "20"
+    assert lines["swing_samples"] == "12" and lines["body_samples"] == "8"
+    assert lines["level_clearance_m"] == "0.02" and lines["level_body_samples"] == "16"
     assert lines["body_accel_m_s2"] == "0.5" and lines["clearance_m"] == "0.029981"
 
 

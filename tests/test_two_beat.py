@@ -245,15 +245,19 @@ def test_long_strides_only_over_level_ground(littledog):
 
 def test_fast_settings_apply_over_level_ground_only(littledog):
     """Where the ground under the feet is not level (step5cm's step between the front and
-    hind feet) the two-beat target is Lambda_c's and the body accelerates at the default
-    bound; on flat ground the two-beat's and the level bound."""
+    hind feet) the two-beat target is Lambda_c's, the body accelerates at the default
+    bound, swings are the default's height and both have the default's samples; on flat
+    ground the two-beat's and the level settings."""
     from dataclasses import replace
 
     from planner.local.soft import SoftPlanner
     from planner.terrain import load_terrain
     from planner.trajectory import Trajectory
 
-    fast = LocalSettings(com_target="two_beat", level_body_accel_m_s2=1.5, level_clearance_m=0.02)
+    fast = LocalSettings(
+        com_target="two_beat", level_body_accel_m_s2=1.5, level_clearance_m=0.02,
+        level_body_samples=16, level_swing_samples=24,
+    )  # fmt: skip
     for name, x, level in (("flat", 0.3, True), ("step5cm", 0.75, False)):
         terrain = load_terrain(name)
         planner = SoftPlanner(littledog, terrain, settings=fast)
@@ -274,3 +278,5 @@ def test_fast_settings_apply_over_level_ground_only(littledog):
         assert (quick < 0.8 * slow) if level else quick == pytest.approx(slow)
         clear = planner.swing_clearance_m(step.moved, 2, step.end.feet_W[2])
         assert clear == (0.02 if level else pytest.approx(0.029981, abs=1e-6))
+        assert planner.body_samples_at(state) == (16 if level else 8)
+        assert planner.swing_samples_at(step.moved, 2, step.end.feet_W[2]) == (24 if level else 12)
