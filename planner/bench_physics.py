@@ -152,18 +152,10 @@ def _job_settings(job: dict):
     """The local planner's settings of a job: its preset's, with its time budget."""
     from dataclasses import replace
 
-    from planner.local.base import LocalSettings
+    from planner.settings import preset_settings
 
-    budget = float(job["time_budget_s"])
-    name = job.get("preset", "default")
-    if name == "default":
-        return LocalSettings(time_budget_s=budget)
-    from planner.robot import load_robot
-    from planner.robot_scale import length_scale
-    from planner.settings import preset, resolve
-
-    local = resolve(preset(name, length_scale(load_robot(job["robot"])))).local
-    return replace(local, time_budget_s=budget)
+    local = preset_settings(job.get("preset", "default"), job["robot"])
+    return replace(local, time_budget_s=float(job["time_budget_s"]))
 
 
 def _sim_fields(metrics: dict) -> dict[str, Any]:

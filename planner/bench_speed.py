@@ -111,18 +111,6 @@ def _flat(length_m: float):
     return Terrain.from_spec(spec, source="bench speed")
 
 
-def _settings(preset: str):
-    """The local planner's settings of ``preset`` ("default": None, the defaults)."""
-    if preset == "default":
-        return None
-    from planner.robot import load_robot
-    from planner.robot_scale import length_scale
-    from planner.settings import preset as preset_values
-    from planner.settings import resolve
-
-    return resolve(preset_values(preset, length_scale(load_robot("littledog")))).local
-
-
 def _plan_once(
     terrain_name: str,
     length_m: float | None,
@@ -140,7 +128,9 @@ def _plan_once(
     from planner.walk import plan_walk
 
     terrain = _flat(length_m) if length_m is not None else load_terrain(terrain_name)
-    settings = _settings(preset)
+    from planner.settings import preset_settings
+
+    settings = preset_settings(preset)
     prof = cProfile.Profile() if profile else None
     t0 = time.perf_counter()
     if prof is not None:

@@ -44,6 +44,7 @@ __all__ = [
     "effective",
     "load_config",
     "preset",
+    "preset_settings",
     "resolve",
 ]
 
@@ -212,6 +213,16 @@ def preset(name: str, length_scale: float = 1.0) -> dict[str, Any]:
         value = raw * length_scale if key.endswith("_m") else raw
         out[key] = _value(_BY_NAME[key], value, f"--preset {name}: {key}")
     return out
+
+
+def preset_settings(name: str, robot_name: str = "littledog") -> LocalSettings:
+    """The local planner's settings of preset ``name`` for a robot ("default": the defaults)."""
+    if name == "default":
+        return LocalSettings()
+    from planner.robot import load_robot
+    from planner.robot_scale import length_scale
+
+    return resolve(preset(name, length_scale(load_robot(robot_name)))).local
 
 
 def load_config(path: str | Path) -> dict[str, Any]:

@@ -577,11 +577,7 @@ class LocalPlanner:
             sol.feasible = False
             sol.diagnosis = f"body move onto three legs: {why}"
             return sol, []
-        land = sol.state.info.get("landing")
-        sol.state = self.path_end(path, support)
-        if land is not None:
-            sol.state.info["landing"] = land
-        return sol, path
+        return self._ended(sol, path, support), path
 
     def _holds_here(self, state: State, leg: int) -> bool:
         """Whether the two-beat crawl keeps the body still before ``leg`` swings.
@@ -612,11 +608,18 @@ class LocalPlanner:
         path = [state, held.state]
         if self.path_problem(path):
             return None
-        land = held.state.info.get("landing")
-        held.state = self.path_end(path, support)
+        return self._ended(held, path, support), path
+
+    def _ended(self, sol, path: list[State], support):
+        """``sol`` ending on the path's end keyframe (:meth:`path_end`).
+
+        Keeps the landing joints Theta2 found the pose with (Theta3's start).
+        """
+        land = sol.state.info.get("landing")
+        sol.state = self.path_end(path, support)
         if land is not None:
-            held.state.info["landing"] = land
-        return held, path
+            sol.state.info["landing"] = land
+        return sol
 
     def body_path(self, state: State, sol, again, u_f, u_n):
         """(solution, samples, why) of the body move from ``state`` to ``sol.state``.
@@ -1066,10 +1069,10 @@ class LocalPlanner:
         (sharp heights, every ``LEVEL_GRID_M``) under the swing's track from the foot to the
         long stride's target, widened by ``LEVEL_WIDTH_M`` each side, and under the stance
         feet lies within ``LEVEL_TOL_M`` of the plane of the four feet, and that plane is
-        within ``LEVEL_SLOPE`` of horizontal. A long stride
-        stretches the legs between the feet: on steps, stairs and slopes that left stances
-        the servos could not hold on three legs (step5cm and stairs stalled with 12 cm
-        strides everywhere), on level ground it halves the steps of a walk.
+        within ``LEVEL_SLOPE`` of horizontal. A long stride stretches the legs between the
+        feet: on steps, stairs and slopes that left stances the servos could not hold on
+        three legs (step5cm and stairs stalled with 12 cm strides everywhere); on level
+        ground it halves the steps of a walk.
         """
         short = self.stride_m()
         if self.settings.level_stride is None:
