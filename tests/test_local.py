@@ -250,36 +250,66 @@ def test_hard_planner_climbs_a_step_with_the_com_over_tau(littledog):
     assert max(beside) <= LATERAL_BAND_M + 1e-3
 
 
-def _dead_end_rule(planner):
-    """FL cannot step after a full-stride HL step: only tracing back gets past it."""
+def _dead_end_rule(planner, fr_full=False):
+    """FL cannot step after a full-stride HL step (with ``fr_full``: nor after an FR step
+    shorter than the full stride): only tracing back gets past it. Returns the strides
+    [m] of the ok steps, leg by leg."""
     real = planner.step
-    last_hl = {"full": False}
+    last = {"hl_full": False, "fr_full": True}
     full = planner.stride_m()
+    strides = {i: [] for i in range(4)}
 
     def step(state, leg, tau, step_m, shrink=None):
         out = real(state, leg, tau, step_m, shrink)
-        if leg == 0 and last_hl["full"]:
+        if leg == 0 and (last["hl_full"] or (fr_full and not last["fr_full"])):
             out.ok, out.end, out.phase, out.diagnosis = False, None, "foot_placement", "dead end"
             out.moved, out.body_path = None, []
-        if leg == 2 and out.ok:
-            last_hl["full"] = step_m >= full - 1e-12
+        if out.ok:
+            strides[leg].append(step_m)
+            last["hl_full" if leg == 2 else "fr_full" if leg == 1 else "-"] = step_m >= full - 1e-12
         return out
 
     planner.step = step
+    return strides
+
+
+def test_soft_planner_retraces_a_dead_end_with_shorter_strides(littledog, monkeypatch):
+    """Soft (8.2) traced back from a dead end plans the steps again with 8.5's shorter
+    strides (soft.RETRACE_STRIDES): a full HL stride that leaves FL no step is replaced by
+    0.6 of it. Planned again at full stride (the rule before) it meets the same dead end."""
+    import planner.local.soft as soft_module
+    from planner.local.base import LocalSettings
+
+    terrain = load_terrain("flat")
+    soft = SoftPlanner(littledog, terrain, settings=LocalSettings(max_cycles=40))
+    strides = _dead_end_rule(soft)
+    plan = soft.plan([0.2, 0.0], [0.45, 0.0])
+    assert plan.reached_goal, plan.message
+    assert plan.stats["retraces"] >= 1
+    full = soft.stride_m()
+    assert any(abs(s - 0.6 * full) < 1e-9 for s in strides[2])  # HL, traced back
+    assert _max_sliding(littledog, terrain, plan.samples) < 1e-6
+
+    monkeypatch.setattr(soft_module, "RETRACE_STRIDES", (1.0, 1.0))
+    alike = SoftPlanner(littledog, terrain, settings=LocalSettings(max_cycles=40))
+    _dead_end_rule(alike)
+    assert not alike.plan([0.2, 0.0], [0.45, 0.0]).reached_goal
 
 
 def test_recursive_planner_traces_back_where_soft_gets_stuck(littledog):
+    """FL steps only after a short HL step and a full FR step: soft's retrace shortens
+    every stride alike and stays stuck; 8.5 tries the ambitions step by step."""
     from planner.local.base import LocalSettings
     from planner.local.recursive import RecursivePlanner
 
     terrain = load_terrain("flat")
-    soft = SoftPlanner(littledog, terrain, settings=LocalSettings(max_cycles=24))
-    _dead_end_rule(soft)
+    soft = SoftPlanner(littledog, terrain, settings=LocalSettings(max_cycles=40))
+    _dead_end_rule(soft, fr_full=True)
     stuck = soft.plan([0.2, 0.0], [0.45, 0.0])
     assert not stuck.reached_goal
 
     rec = RecursivePlanner(littledog, terrain)
-    _dead_end_rule(rec)
+    _dead_end_rule(rec, fr_full=True)
     plan = rec.plan([0.2, 0.0], [0.45, 0.0])
     assert plan.reached_goal, plan.message
     assert plan.stats["backtracks"] >= 1

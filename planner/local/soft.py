@@ -19,7 +19,11 @@ its next foothold. Where the greedy steps lead into a dead end (``RETRACE_FAILS`
 attempts in a row, or ``no_progress_cycles / 2`` cycles without progress) the walk is
 traced back ``RETRACE_STEPS`` steps before its best point and those steps are planned
 again with the foothold look-ahead of the recursive planner (8.5): each foothold must leave
-the next leg a body move. Once per point reached: a dead end met again stops the planner.
+the next leg a body move, and the strides are shortened as 8.5's less ambitious moves
+(``RETRACE_STRIDES``): a dead end met again at the same point is traced back once more
+with the next, shorter fraction, and only when none is left does it stop the planner.
+Greedy full strides let the front feet climb step10cm while the hind feet stayed below, a
+stance too stretched for any hind body move; replanned alike it met the same dead end.
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ from planner.local.gait_queue import GaitQueue
 RETRACE_FAILS = 4  # failed step attempts in a row that trigger a retrace
 RETRACE_STEPS = 4  # steps traced back before the best point (one crawl cycle)
 LOOKAHEAD_STEPS = 8  # steps past the dead end planned with the look-ahead
+RETRACE_STRIDES = (0.6, 0.3)  # stride fractions of the 1st, 2nd retrace at one point (8.5's rho_3)
 
 
 class SoftPlanner(LocalPlanner):
@@ -50,17 +55,20 @@ class SoftPlanner(LocalPlanner):
         # before each committed step: (walk mark, queue, run cycle)
         history: list[tuple[tuple, tuple, int]] = []
         retrace_dist = float("inf")  # the best distance to the goal at the last retrace
+        level = 0  # retraces at that point: the steps retraced take RETRACE_STRIDES[level - 1]
         lookahead_until = -1  # walk steps up to which footholds are looked ahead
         while not (message := self.stop_reason(walk, run, fails_in_row)):
             stalled = run.cycles - run.best_at >= st.no_progress_cycles // 2
             if (
                 (fails_in_row >= RETRACE_FAILS or stalled)
                 and history
-                and run.best_dist_m < retrace_dist - PROGRESS_M
+                and (run.best_dist_m < retrace_dist - PROGRESS_M or level < len(RETRACE_STRIDES))
             ):
                 # a dead end: back to RETRACE_STEPS steps before the best point, and plan
-                # from there with the look-ahead (8.5's tracing back, one level)
-                retrace_dist = run.best_dist_m
+                # from there with the look-ahead and shorter strides (8.5's tracing back)
+                new_point = run.best_dist_m < retrace_dist - PROGRESS_M
+                level = 1 if new_point else level + 1
+                retrace_dist = min(retrace_dist, run.best_dist_m)
                 lookahead_until = walk.steps + LOOKAHEAD_STEPS
                 at_best = max(k for k, h in enumerate(history) if h[2] <= run.best_at or k == 0)
                 k = max(at_best - RETRACE_STEPS, 0)
@@ -73,13 +81,13 @@ class SoftPlanner(LocalPlanner):
                 run.best_at = run.cycles
                 self.extra_stats["retraces"] += 1
             self.foothold_lookahead = walk.steps < lookahead_until
+            ambition = RETRACE_STRIDES[level - 1] if self.foothold_lookahead else 1.0
             run.cycles += 1
             mark = walk.mark()
             before = tuple(queue)
             leg = queue.pop()
-            step = self.step(
-                walk.state, leg, run.tau, self.stride_at(walk.state, leg, run.tau) * step_scale[leg]
-            )
+            stride = self.stride_at(walk.state, leg, run.tau) * step_scale[leg] * ambition
+            step = self.step(walk.state, leg, run.tau, stride)
             walk.add(step)  # a failed placement keeps its body move
             if not step.ok:
                 self.failed(run, step)
