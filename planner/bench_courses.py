@@ -87,8 +87,15 @@ def expand_courses(names) -> tuple[str, ...]:
 
 
 def goal_for(course: str, default=GOAL_XY) -> tuple[float, float]:
-    """The goal of a named course's walk: ``COURSE_GOALS`` or ``default``."""
-    g = COURSE_GOALS.get(course, default)
+    """The goal of a course's walk: ``COURSE_GOALS`` or ``default``.
+
+    A generated or feature-ladder course's (gen:..., feat:...) is its own
+    (:func:`planner.course_gen.course_goal_xy`, past its last edge).
+    """
+    from planner.course_gen import course_goal_xy, course_spec
+
+    spec = None if course in COURSE_GOALS else course_spec(course)
+    g = course_goal_xy(spec) if spec is not None else COURSE_GOALS.get(course, default)
     return float(g[0]), float(g[1])
 
 

@@ -36,6 +36,18 @@ def test_jobs_carry_each_course_its_goal():
     assert goal_for("flat", (1.0, 0.5)) == (1.0, 0.5)  # the caller's default otherwise
 
 
+@pytest.mark.parametrize("course", ["feat:stones:0.07", "feat:step:0.1", "gen:3"])
+def test_a_ladder_or_generated_course_walks_to_its_own_goal(course):
+    """`bench courses --courses ladder` walked every feature course to (2.2, 0), off the
+    shorter ones: each walks to the end of its feature segment, on the terrain."""
+    from planner.course_gen import course_goal_xy, course_spec
+
+    goal = goal_for(course)
+    assert goal == course_goal_xy(course_spec(course))
+    x0, x1, y0, y1 = load_terrain(course).bounds
+    assert x0 + 0.3 <= goal[0] <= x1 - 0.3
+
+
 def test_the_table_counts_the_recursive_planners_backtracks():
     """A recursive job's record carries its backtracks and window retraces (8.5), and the
     table shows them; other planners show '-'."""
