@@ -19,11 +19,13 @@ its next foothold. Where the greedy steps lead into a dead end (``RETRACE_FAILS`
 attempts in a row, or ``no_progress_cycles / 2`` cycles without progress) the walk is
 traced back ``RETRACE_STEPS`` steps before its best point and those steps are planned
 again with the foothold look-ahead of the recursive planner (8.5): each foothold must leave
-the next leg a body move, and the strides are shortened as 8.5's less ambitious moves
-(``RETRACE_STRIDES``): a dead end met again at the same point is traced back once more
-with the next, shorter fraction, and only when none is left does it stop the planner.
-Greedy full strides let the front feet climb step10cm while the hind feet stayed below, a
-stance too stretched for any hind body move; replanned alike it met the same dead end.
+the next leg a body move. A dead end met again at the same point is traced back again with
+8.5's less ambitious moves, shorter strides (``RETRACE_STRIDES``), and only when none is
+left does it stop the planner. On step10cm the full strides put the front feet up the step
+with the hind feet stretched below, a stance no hind body move leaves; planned again alike
+it met the same dead end, at 0.6 of the stride it climbs. The first retrace keeps the full
+stride: where one retrace sufficed the plans stay as they were (barrier9cm's soft plan,
+which walks in MuJoCo; its plan retraced at 0.6 fell there).
 """
 
 from __future__ import annotations
@@ -34,7 +36,7 @@ from planner.local.gait_queue import GaitQueue
 RETRACE_FAILS = 4  # failed step attempts in a row that trigger a retrace
 RETRACE_STEPS = 4  # steps traced back before the best point (one crawl cycle)
 LOOKAHEAD_STEPS = 8  # steps past the dead end planned with the look-ahead
-RETRACE_STRIDES = (0.6, 0.3)  # stride fractions of the 1st, 2nd retrace at one point (8.5's rho_3)
+RETRACE_STRIDES = (1.0, 0.6, 0.3)  # stride fraction of the 1st, 2nd, 3rd retrace at one point
 
 
 class SoftPlanner(LocalPlanner):
@@ -56,6 +58,7 @@ class SoftPlanner(LocalPlanner):
         history: list[tuple[tuple, tuple, int]] = []
         retrace_dist = float("inf")  # the best distance to the goal at the last retrace
         level = 0  # retraces at that point: the steps retraced take RETRACE_STRIDES[level - 1]
+        retrace_k = 0  # ... all from this step of history
         lookahead_until = -1  # walk steps up to which footholds are looked ahead
         while not (message := self.stop_reason(walk, run, fails_in_row)):
             stalled = run.cycles - run.best_at >= st.no_progress_cycles // 2
@@ -66,12 +69,14 @@ class SoftPlanner(LocalPlanner):
             ):
                 # a dead end: back to RETRACE_STEPS steps before the best point, and plan
                 # from there with the look-ahead and shorter strides (8.5's tracing back)
-                new_point = run.best_dist_m < retrace_dist - PROGRESS_M
-                level = 1 if new_point else level + 1
-                retrace_dist = min(retrace_dist, run.best_dist_m)
-                lookahead_until = walk.steps + LOOKAHEAD_STEPS
-                at_best = max(k for k, h in enumerate(history) if h[2] <= run.best_at or k == 0)
-                k = max(at_best - RETRACE_STEPS, 0)
+                if run.best_dist_m < retrace_dist - PROGRESS_M:  # a new point: full strides
+                    level, retrace_dist = 1, run.best_dist_m
+                    lookahead_until = walk.steps + LOOKAHEAD_STEPS
+                    at_best = max(k for k, h in enumerate(history) if h[2] <= run.best_at or k == 0)
+                    retrace_k = max(at_best - RETRACE_STEPS, 0)
+                else:  # the same dead end again: from the same step, shorter strides
+                    level += 1
+                k = min(retrace_k, len(history) - 1)
                 mark, legs, _ = history[k]
                 del history[k:]
                 walk.rewind(mark)
