@@ -228,6 +228,11 @@ def render_markdown(result: dict[str, Any]) -> str:
         "",
         f"Walks from {tuple(c['start'])} to {tuple(c['goal'])} m"
         + "".join(f" ({k}: to {v})" for k, v in COURSE_GOALS.items() if k in c["courses"])
+        + (
+            " (generated and feature courses: to their own goals, past their last edge)"
+            if any(str(k).startswith(("gen:", "feat:")) for k in c["courses"])
+            else ""
+        )
         + ", time budget "
         f"{c['time_budget_s']:g} s each, {c['workers']} jobs at once"
         + (f" on the Dask cluster {c['scheduler']}" if c["scheduler"] else "")

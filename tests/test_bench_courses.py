@@ -46,6 +46,8 @@ def test_a_ladder_or_generated_course_walks_to_its_own_goal(course):
     assert goal == course_goal_xy(course_spec(course))
     x0, x1, y0, y1 = load_terrain(course).bounds
     assert x0 + 0.3 <= goal[0] <= x1 - 0.3
+    job = course_jobs(courses=(course,), planners=("soft",))[0]
+    assert tuple(job["goal"]) == goal
 
 
 def test_the_table_counts_the_recursive_planners_backtracks():
