@@ -294,7 +294,7 @@ def effective(planner: Any, seed: int = 1) -> dict:
         "clearance_m": float(loc.clearance_m or default_clearance_m(planner.robot)),
         "theta.clearance_m": float(loc.theta.clearance_m),
         "com_target": str(loc.com_target),
-        "level_stride": None if loc.level_stride is None else float(loc.level_stride),
+        "level_stride": _float_or_none(loc.level_stride),
         "level_body_accel_m_s2": _float_or_none(loc.level_body_accel_m_s2),
         "level_clearance_m": _float_or_none(loc.level_clearance_m),
         "level_body_samples": _int_or_none(loc.level_body_samples),

@@ -1080,9 +1080,8 @@ class LocalPlanner:
         long = self.settings.level_stride * float(np.min(self.robot.reach_m))
         if long <= short:
             return short
-        feet = np.asarray(state.feet_W, float).reshape(4, 3)
         target = self.stride_target(state, leg, tau, long)
-        return long if self._on_feet_plane(feet, _track_xy(feet[leg], target)) else short
+        return long if self._level_track(state, leg, target) else short
 
     def level_under(self, state: State) -> bool:
         """Whether the ground under the four feet is level (:meth:`stride_at`'s test).

@@ -62,14 +62,15 @@ class SoftPlanner(LocalPlanner):
         lookahead_until = -1  # walk steps up to which footholds are looked ahead
         while not (message := self.stop_reason(walk, run, fails_in_row)):
             stalled = run.cycles - run.best_at >= st.no_progress_cycles // 2
+            new_point = run.best_dist_m < retrace_dist - PROGRESS_M
             if (
                 (fails_in_row >= RETRACE_FAILS or stalled)
                 and history
-                and (run.best_dist_m < retrace_dist - PROGRESS_M or level < len(RETRACE_STRIDES))
+                and (new_point or level < len(RETRACE_STRIDES))
             ):
                 # a dead end: back to RETRACE_STEPS steps before the best point, and plan
                 # from there with the look-ahead and shorter strides (8.5's tracing back)
-                if run.best_dist_m < retrace_dist - PROGRESS_M:  # a new point: full strides
+                if new_point:  # full strides
                     level, retrace_dist = 1, run.best_dist_m
                     lookahead_until = walk.steps + LOOKAHEAD_STEPS
                     at_best = max(k for k, h in enumerate(history) if h[2] <= run.best_at or k == 0)
