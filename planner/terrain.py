@@ -26,7 +26,8 @@ segment start inside a ``course``):
 ``stepping_stones``
     A pit ``depth`` deep over ``x_start..x_end`` x ``y_start..y_end`` holding a centred grid of
     square stones (``size``, ``gap``) whose tops are at ``height`` + U(-1, 1) *
-    ``height_jitter`` (``seed``).
+    ``height_jitter`` (``seed``); or, instead of ``gap``, hand-placed stones: ``stones``, a
+    list of [x, y] centres or [x, y, top].
 ``rough``
     Band-limited random relief: ``terms`` (<= 60) seeded 2-D cosines with wavelengths in
     [``wavelength``, ``wavelength_max``], amplitudes proportional to wavelength, scaled so
@@ -572,7 +573,12 @@ class _SteppingStones(_Kind):
         super().__init__(f, ctx)
         x0, x1, y0, y1 = _region(f, ctx)
         self.size = f.number("size", lo=0.0, lo_open=True, hi=2.0, hint="stone side, metres")
-        self.gap = f.number("gap", lo=0.0, lo_open=True, hi=2.0, hint="metres between stones")
+        placed = f.has("stones")
+        if placed and f.has("gap"):
+            raise f.fail("gap", "give either 'gap' (a grid of stones) or 'stones', not both")
+        self.gap = None if placed else f.number(
+            "gap", lo=0.0, lo_open=True, hi=2.0, hint="metres between stones, or 'stones'"
+        )  # fmt: skip
         self.height = f.number("height", 0.0, lo=-1.0, hi=1.0)
         self.height_jitter = f.number("height_jitter", 0.0, lo=0.0, hi=0.5)
         self.depth = f.number("depth", 0.1, lo=0.0, lo_open=True, hi=5.0)
@@ -590,6 +596,9 @@ class _SteppingStones(_Kind):
             "seed": self.seed,
         }
         self.region = (x0, x1, y0, y1)
+        if placed:
+            self._place(f, ctx)
+            return
         pitch = self.size + self.gap
         starts = []
         for key, lo, hi in (("x_end", x0, x1), ("y_max", y0, y1)):
@@ -617,6 +626,59 @@ class _SteppingStones(_Kind):
         )
         self.tops = tops.ravel()
         self.rise = self.tops + self.depth
+        self.placed = False
+
+    def _place(self, f: _Fields, ctx: _Context) -> None:
+        """Hand-placed stones from ``stones``: [x, y] centres or [x, y, top].
+
+        Tops at ``height`` + jitter unless given; x relative to a course segment's start,
+        as ``x_start``. Stones must lie inside the pit and not overlap.
+        """
+        rows = f.raw("stones")
+        hint = "a list of [x, y] or [x, y, top] stone centres in metres"
+        if not isinstance(rows, (list, tuple)) or not rows:
+            raise f.fail("stones", f"expected {hint}, got {_show(rows)}")
+        if len(rows) > MAX_STONES:
+            raise f.fail("stones", f"{len(rows)} stones; at most {MAX_STONES}")
+        x0, x1, y0, y1 = self.region
+        rng = np.random.default_rng(self.seed)
+        jitter = self.height_jitter * rng.uniform(-1.0, 1.0, len(rows))
+        centres, tops = [], []
+        for i, row in enumerate(rows):
+            ok = isinstance(row, (list, tuple)) and len(row) in (2, 3)
+            if ok:
+                ok = all(
+                    not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v)
+                    for v in row
+                )
+            if not ok:
+                raise f.fail(f"stones[{i}]", f"expected [x, y] or [x, y, top], got {_show(row)}")
+            cx, cy = float(row[0]), float(row[1])
+            h = self.size / 2
+            if not (x0 <= cx - h and cx + h <= x1 and y0 <= cy - h and cy + h <= y1):
+                raise f.fail(
+                    f"stones[{i}]",
+                    f"stone at [{cx}, {cy}] (side {self.size}) is not inside the pit "
+                    f"x {x0}..{x1}, y {y0}..{y1}; move it or widen x_start..x_end, y_start..y_end",
+                )
+            centres.append((cx, cy))
+            tops.append(float(row[2]) if len(row) == 3 else self.height + float(jitter[i]))
+        c = np.array(centres)
+        near = np.all(np.abs(c[:, None, :] - c[None, :, :]) < self.size, axis=-1)
+        np.fill_diagonal(near, False)
+        if near.any():
+            i, j = (int(k) for k in np.argwhere(near)[0])
+            raise f.fail(
+                f"stones[{j}]",
+                f"overlaps stones[{i}] (stones of side {self.size} must not overlap); move it",
+            )
+        del self.spec["gap"]
+        self.spec["stones"] = [list(map(float, r)) for r in rows]
+        self.xa, self.ya = c[:, 0] - self.size / 2, c[:, 1] - self.size / 2
+        self.ix = self.iy = np.arange(len(c))
+        self.tops = np.array(tops)
+        self.rise = self.tops + self.depth
+        self.placed = True
 
     def expr(self, u: Any, y: Any, ops: Any) -> Any:
         """Smoothed pit plus separable smoothed stone boxes."""
@@ -633,6 +695,12 @@ class _SteppingStones(_Kind):
         """-depth in the pit, the stone's top on a stone, 0 outside."""
         x0, x1, y0, y1 = self.region
         z = -self.depth * _box_sharp(u, x0, x1) * _box_sharp(y, y0, y1)
+        if self.placed:  # the highest stone under each point
+            uu, yy = np.asarray(u, float)[..., None], np.asarray(y, float)[..., None]
+            on = (uu >= self.xa) & (uu < self.xa + self.size)
+            on &= (yy >= self.ya) & (yy < self.ya + self.size)
+            top = np.where(on, self.tops, -np.inf).max(axis=-1)
+            return np.where(on.any(axis=-1), top, z)
         i = np.searchsorted(self.xa, u, side="right") - 1
         j = np.searchsorted(self.ya, y, side="right") - 1
         ic, jc = np.clip(i, 0, None), np.clip(j, 0, None)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 
 import casadi as ca
 import numpy as np
@@ -304,6 +305,43 @@ def test_stepping_stones_sharp_and_smooth():
     assert t.height_sharp(k.xa[0] + 0.12, cy[0]) == -0.1
     assert t.height(k.xa[0] + 0.12, cy[0]) == pytest.approx(-0.1, abs=1e-4)
     assert t.height_sharp(0.45, 0.0) == 0.0 and t.height_sharp(2.05, 0.0) == 0.0
+
+
+def test_hand_placed_stones_sharp_smooth_and_spec(tmp_path):
+    """``stones``: each stone's top over its square (jittered, or its own third number),
+    the pit between and around them, smooth within 1e-8 of sharp 10 w from the edges;
+    the spec rebuilds the same course; overlapping, outside and grid-and-list specs are
+    refused with the field named."""
+    spec = {
+        "name": "placed", "length": 2.5, "kind": "stepping_stones", "x_start": 0.5, "x_end": 1.5,
+        "size": 0.1, "depth": 0.1, "height_jitter": 0.01, "seed": 3,
+        "stones": [[0.6, 0.07], [0.6, -0.07], [0.9, 0.0, 0.02], [1.3, 0.3]],
+    }  # fmt: skip
+    t = Terrain.from_spec(spec)
+    cx = np.array([0.6, 0.6, 0.9, 1.3])
+    cy = np.array([0.07, -0.07, 0.0, 0.3])
+    tops = t.height_sharp(cx, cy)
+    assert tops[2] == 0.02 and np.all(np.abs(tops[[0, 1, 3]]) <= 0.01) and np.ptp(tops) > 0
+    for dx, dy in ((0.049, 0.0), (-0.05, 0.049), (0.0, -0.05)):  # the squares' corners
+        np.testing.assert_array_equal(t.height_sharp(cx + dx, cy + dy), tops)
+    np.testing.assert_allclose(t.height(cx, cy), tops, atol=1e-8)
+    for x, y in ((0.75, 0.0), (0.6, 0.2), (1.3, 0.0), (0.9, 0.051)):  # the pit
+        assert t.height_sharp(x, y) == -0.1
+    assert t.height(0.75, 0.0) == pytest.approx(-0.1, abs=1e-4)
+    assert t.height_sharp(0.45, 0.0) == 0.0 and t.height_sharp(1.55, 0.0) == 0.0
+    again = Terrain.from_spec(t.spec)
+    p = _random_points(t, 300, seed=5)
+    np.testing.assert_array_equal(
+        again.height_sharp(p[:, 0], p[:, 1]), t.height_sharp(p[:, 0], p[:, 1])
+    )
+    for change, field in (
+        ({"stones": [[0.6, 0.07], [0.65, 0.1]]}, "stones[1]"),
+        ({"stones": [[0.52, 0.0]]}, "stones[0]"),
+        ({"gap": 0.05}, "gap"),
+        ({"stones": [[0.6]]}, "stones[0]"),
+    ):
+        with pytest.raises(TerrainError, match=re.escape(field)):
+            Terrain.from_spec({**spec, **change})
 
 
 def test_logs_sharp_and_smooth():
