@@ -514,3 +514,43 @@ def test_a_long_legged_robot_ends_standing_over_the_goal():
     # sphere feet rolling as the shanks turn (radius x rotation: under a radian's worth)
     moved = np.linalg.norm(np.asarray(last.feet) - plan.keyframes[-2].feet, axis=1)
     assert np.all(moved < robot.foot_radius_m)
+
+
+@pytest.mark.parametrize("name", ["soft", "recursive"])
+def test_a_planner_stopped_after_tracing_back_keeps_the_walk_that_came_nearest(littledog, name):
+    """No step of FL past x = 0.3 m: both planners trace back (soft's retraces; 8.5's
+    windows, the second stall the whole walk), then stop short; the plan returned is the
+    walk that came nearest the goal, not the one left after the last rewind (recursive
+    returned a 0-step plan on feat:step:-0.12 so), and it is still one consistent walk."""
+    from planner.local.base import LocalSettings
+    from planner.local.recursive import RecursivePlanner, RecursiveSettings
+
+    terrain = load_terrain("flat")
+    settings = LocalSettings(max_cycles=400, no_progress_cycles=12)
+    if name == "soft":
+        planner = SoftPlanner(littledog, terrain, settings=settings)
+    else:  # small windows: the test is about what is kept, not about the search
+        small = RecursiveSettings(lookahead=2, node_budget=6)
+        planner = RecursivePlanner(littledog, terrain, settings=settings, recursion=small)
+    real = planner.step
+    seen = {"x": -np.inf}
+
+    def step(state, leg, tau, step_m, shrink=None):
+        out = real(state, leg, tau, step_m, shrink)
+        if leg == 0 and state.feet_W[0, 0] > 0.3:
+            out.ok, out.end, out.phase, out.diagnosis = False, None, "foot_placement", "wall"
+            out.moved, out.body_path = None, []
+        if out.ok:
+            seen["x"] = max(seen["x"], float(planner.check.com_W(out.end)[0]))
+        return out
+
+    planner.step = step
+    plan = planner.plan([0.2, 0.0], [0.6, 0.0])
+    assert not plan.reached_goal
+    retraced = plan.stats.get("retraces", 0) + plan.stats.get("window_retraces", 0)
+    assert retraced >= 1
+    com_x = float(planner.check.com_W(plan.keyframes[-1])[0])
+    assert com_x >= seen["x"] - 0.03  # within a step's body move of the farthest reached
+    assert plan.stats["steps"] >= 4
+    assert _max_sliding(littledog, terrain, plan.samples) < 1e-6
+    assert np.all(np.diff(plan.times) > 0)

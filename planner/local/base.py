@@ -281,6 +281,42 @@ class Walk:
         del self.keyframes[k:], self.samples[s:], self.times[s:]
         self.steps = n
 
+    def copy(self) -> tuple:
+        """The walk so far, for :meth:`restore` after a rewind (states are not copied)."""
+        return list(self.keyframes), list(self.samples), list(self.times), self.steps
+
+    def restore(self, kept: tuple) -> None:
+        """Back to a walk kept by :meth:`copy`."""
+        keyframes, samples, times, self.steps = kept
+        self.keyframes, self.samples, self.times = list(keyframes), list(samples), list(times)
+
+
+class NearestWalk:
+    """The walk that came nearest the goal before a planner traced back across it.
+
+    Tracing back (8.5; soft's retraces) forgets steps; a planner that then stops short of
+    where it had been returns this walk instead (nothing computed is lost).
+    """
+
+    def __init__(self) -> None:
+        self.kept: tuple | None = None
+        self.dist_m = np.inf
+
+    def offer(self, walk: Walk, dist_m: float) -> None:
+        """Keep ``walk`` (about to be rewound) if it is the nearest so far."""
+        if dist_m < self.dist_m:
+            self.kept, self.dist_m = walk.copy(), dist_m
+
+    def settle(self, walk: Walk, dist_m: float, message: str) -> str:
+        """Restore the kept walk where it ends ``PROGRESS_M`` nearer than ``walk``."""
+        if self.kept is None or self.dist_m >= dist_m - PROGRESS_M:
+            return message
+        walk.restore(self.kept)
+        return (
+            f"{message}; the plan is the walk that came nearest ({100 * self.dist_m:.0f} cm "
+            f"from the goal) before it was traced back"
+        )
+
 
 class LocalPlanner:
     """The shared part of the local planners, for one robot on one terrain.

@@ -44,7 +44,7 @@ import math
 import time
 from dataclasses import dataclass, field, replace
 
-from planner.local.base import LocalPlanner, Step, Walk, _Run
+from planner.local.base import LocalPlanner, NearestWalk, Step, Walk, _Run
 
 AMBITIONS = ((1.0, None), (0.6, None), (0.3, 0.6))  # (rho_3 stride fraction, rho_2 shrink)
 MAX_WINDOW_RETRACES = 4  # committed windows planned again when no step is left, per run
@@ -157,6 +157,7 @@ class RecursivePlanner(LocalPlanner):
         cautious = False
         nearest, stalled = self.distance_to_goal(walk.state, run), 0
         thorough_to = math.inf  # every leg checked while the COM is farther from the goal [m]
+        nearest_walk = NearestWalk()
         while not (message := self.stop_reason(walk, run)):
             self.extra_stats["windows"] += 1
             root = walk.mark()
@@ -178,14 +179,16 @@ class RecursivePlanner(LocalPlanner):
                         # trace back across windows (8.5: as far back as needed): the last
                         # committed window is planned again, its most cautious moves first
                         self.extra_stats["window_retraces"] += 1
+                        nearest_walk.offer(walk, self.distance_to_goal(walk.state, run))
                         root, queue = committed.pop()
                         walk.rewind(root)
                         cautious = True
                         continue
-                    return (
+                    message = (
                         f"stuck: no step possible from here with any leg or ambition; last: "
                         f"{run.last_failure}"
                     )
+                    break
                 self.extra_stats["partial_windows"] += 1
                 for step in win.best:
                     walk.add(step)
@@ -207,12 +210,13 @@ class RecursivePlanner(LocalPlanner):
                 self.extra_stats["window_retraces"] += 1
                 self.extra_stats["stall_retraces"] += 1
                 first = self.extra_stats["stall_retraces"] == 1
+                nearest_walk.offer(walk, d)
                 for _ in range(stalled + 1 if first else len(committed)):
                     root, queue = committed.pop()
                 walk.rewind(root)
                 thorough_to = nearest - PROGRESS_M
                 nearest, stalled = self.distance_to_goal(walk.state, run), 0
-        return message
+        return nearest_walk.settle(walk, self.distance_to_goal(walk.state, run), message)
 
 
 __all__ = ["AMBITIONS", "RecursivePlanner", "RecursiveSettings"]

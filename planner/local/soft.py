@@ -30,7 +30,15 @@ which walks in MuJoCo; its plan retraced at 0.6 fell there).
 
 from __future__ import annotations
 
-from planner.local.base import PROGRESS_M, LocalPlan, LocalPlanner, LocalSettings, Walk, _Run
+from planner.local.base import (
+    PROGRESS_M,
+    LocalPlan,
+    LocalPlanner,
+    LocalSettings,
+    NearestWalk,
+    Walk,
+    _Run,
+)
 from planner.local.gait_queue import GaitQueue
 
 RETRACE_FAILS = 4  # failed step attempts in a row that trigger a retrace
@@ -60,6 +68,7 @@ class SoftPlanner(LocalPlanner):
         level = 0  # retraces at that point: the steps retraced take RETRACE_STRIDES[level - 1]
         retrace_k = 0  # ... all from this step of history
         lookahead_until = -1  # walk steps up to which footholds are looked ahead
+        nearest_walk = NearestWalk()
         while not (message := self.stop_reason(walk, run, fails_in_row)):
             stalled = run.cycles - run.best_at >= st.no_progress_cycles // 2
             new_point = run.best_dist_m < retrace_dist - PROGRESS_M
@@ -80,6 +89,7 @@ class SoftPlanner(LocalPlanner):
                 k = min(retrace_k, len(history) - 1)
                 mark, legs, _ = history[k]
                 del history[k:]
+                nearest_walk.offer(walk, self.distance_to_goal(walk.state, run))
                 walk.rewind(mark)
                 queue = GaitQueue(legs)
                 step_scale = {i: 1.0 for i in range(4)}
@@ -111,7 +121,7 @@ class SoftPlanner(LocalPlanner):
             queue.push(leg)
             self.report(walk, run)
         self.foothold_lookahead = False
-        return message
+        return nearest_walk.settle(walk, self.distance_to_goal(walk.state, run), message)
 
 
 __all__ = ["LocalPlan", "LocalSettings", "SoftPlanner"]
