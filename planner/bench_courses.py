@@ -29,6 +29,7 @@ from planner.outputs import write_atomic
 __all__ = [
     "COURSES",
     "GLOBAL_COURSES",
+    "BACKTRACK_COURSES",
     "HARD_COURSES",
     "PLANNERS",
     "expand_courses",
@@ -62,9 +63,12 @@ HARD_COURSES = (
     "sparse_stones",
     "mix4m",
 )
+# issue 15's course where greedy soft stepping dead-ends and 8.5's backtracking reaches
+BACKTRACK_COURSES = ("step6cm",)
 # issue 17's courses, walls and rocks the straight line runs into (planner "global")
 GLOBAL_COURSES = ("barrier15cm_opening", "maze_two_walls", "tall_rocks")
-COURSE_GOALS = {"mix4m": (4.2, 0.0), "maze_two_walls": (2.6, 0.0)}  # longer than 2 m
+# longer than 2 m; step6cm's on the step's top, 35 cm past its edge
+COURSE_GOALS = {"mix4m": (4.2, 0.0), "maze_two_walls": (2.6, 0.0), "step6cm": (1.1, 0.0)}
 PLANNERS = ("soft", "recursive")
 ROBOTS = ("littledog",)
 START_XY = (0.2, 0.0)
@@ -76,12 +80,13 @@ TIME_BUDGET_S = 240.0
 def expand_courses(names) -> tuple[str, ...]:
     """Course names with the groups spelled out.
 
-    'named' (:data:`COURSES`), 'hard', 'global' and 'ladder'
+    'named' (:data:`COURSES`), 'hard', 'backtrack', 'global' and 'ladder'
     (:func:`planner.course_gen.ladder_course_names`).
     """
     from planner.course_gen import ladder_course_names
 
     groups = {"named": COURSES, "hard": HARD_COURSES, "global": GLOBAL_COURSES}
+    groups["backtrack"] = BACKTRACK_COURSES
     groups["ladder"] = tuple(ladder_course_names())
     return tuple(dict.fromkeys(c for n in names for c in groups.get(n, (n,))))
 
@@ -293,6 +298,7 @@ def add_courses_parser(bench_sub) -> argparse.ArgumentParser:
         "--courses",
         default="named,hard",
         help="comma-separated terrains; 'named' = the 9 first courses, 'hard' = issue 15's 8, "
+        "'backtrack' = step6cm (soft dead-ends, recursive reaches), "
         "'global' = issue 17's 3 (walls, rocks)",
     )
     p.add_argument(

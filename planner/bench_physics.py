@@ -41,7 +41,14 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
-from planner.bench_courses import COURSES, GOAL_XY, START_XY, expand_courses, goal_for
+from planner.bench_courses import (
+    COURSE_GOALS,
+    COURSES,
+    GOAL_XY,
+    START_XY,
+    expand_courses,
+    goal_for,
+)
 from planner.errors import InputError
 from planner.outputs import write_atomic
 
@@ -464,7 +471,9 @@ def render_markdown(result: dict[str, Any]) -> str:
         f"{'' if c.get('preset', 'default') == 'default' else ' (--preset ' + c['preset'] + ')'}"
         " from "
         f"{tuple(c['start'])} to {tuple(c['goal_named'])} m on the "
-        f"named courses, to the end of the course minus 0.4 m on the generated ones "
+        f"named courses"
+        + "".join(f" ({k}: to {v})" for k, v in COURSE_GOALS.items() if k in c.get("courses", ()))
+        + f", to the end of the course minus 0.4 m on the generated ones "
         f"(`planner/course_gen.py`, difficulty {c['difficulty']:g}), time budget "
         f"{c['time_budget_s']:g} s; each plan executed in MuJoCo at time scale "
         f"{c['time_scale']:g}: {', '.join(MODE_NAMES.get(x, x) for x in c['modes'])}. "
@@ -654,7 +663,8 @@ def add_physics_parser(bench_sub) -> argparse.ArgumentParser:
         "--courses",
         default="named",
         help="comma-separated terrains; 'named' = the 9 first courses, 'hard' = issue 15's 8, "
-        "'ladder' = the feature ladder (feat:KIND:SIZE, planner.course_gen.LADDER)",
+        "'backtrack' = step6cm, 'ladder' = the feature ladder (feat:KIND:SIZE, "
+        "planner.course_gen.LADDER)",
     )
     p.add_argument("--generated", type=int, default=GENERATED, help="generated courses")
     p.add_argument("--first-seed", type=int, default=0, help="seed of the first generated course")

@@ -3,6 +3,7 @@
 import pytest
 
 from planner.bench_courses import (
+    BACKTRACK_COURSES,
     COURSES,
     GOAL_XY,
     HARD_COURSES,
@@ -15,12 +16,12 @@ from planner.terrain import load_terrain
 
 
 def test_groups_expand_in_order_without_duplicates():
-    got = expand_courses(["named", "flat", "hard", "my.yaml"])
-    assert got == (*COURSES, *HARD_COURSES, "my.yaml")
+    got = expand_courses(["named", "flat", "hard", "backtrack", "my.yaml"])
+    assert got == (*COURSES, *HARD_COURSES, *BACKTRACK_COURSES, "my.yaml")
     assert expand_courses(["gap6cm"]) == ("gap6cm",)
 
 
-@pytest.mark.parametrize("course", [*COURSES, *HARD_COURSES])
+@pytest.mark.parametrize("course", [*COURSES, *HARD_COURSES, *BACKTRACK_COURSES])
 def test_every_course_loads_and_its_walk_lies_on_it(course):
     """Start and goal at least a body length inside the terrain's bounds."""
     terrain = load_terrain(course)

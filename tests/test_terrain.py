@@ -40,6 +40,7 @@ NAMED = [
     "logs",
     "course_rough",
     *HARD_COURSES,
+    "step6cm",
 ]
 W = 0.005  # default smoothing width
 
