@@ -30,6 +30,7 @@ __all__ = [
     "COURSES",
     "GLOBAL_COURSES",
     "BACKTRACK_COURSES",
+    "COURSE_GROUPS_HELP",
     "HARD_COURSES",
     "PLANNERS",
     "expand_courses",
@@ -75,6 +76,13 @@ START_XY = (0.2, 0.0)
 GOAL_XY = (2.2, 0.0)
 # [s] per plan: since the rolling feet and per-sample torque checks planning is ~5x slower
 TIME_BUDGET_S = 240.0
+
+
+COURSE_GROUPS_HELP = (
+    "comma-separated terrains; 'named' = the 9 first courses, 'hard' = issue 15's 8, "
+    "'backtrack' = step6cm (soft dead-ends, recursive reaches), 'global' = issue 17's 3 "
+    "(walls, rocks), 'ladder' = the feature ladder (feat:KIND:SIZE, planner.course_gen.LADDER)"
+)  # the groups of expand_courses, for the --courses of bench courses and bench physics
 
 
 def expand_courses(names) -> tuple[str, ...]:
@@ -297,9 +305,7 @@ def add_courses_parser(bench_sub) -> argparse.ArgumentParser:
     p.add_argument(
         "--courses",
         default="named,hard",
-        help="comma-separated terrains; 'named' = the 9 first courses, 'hard' = issue 15's 8, "
-        "'backtrack' = step6cm (soft dead-ends, recursive reaches), "
-        "'global' = issue 17's 3 (walls, rocks)",
+        help=COURSE_GROUPS_HELP,
     )
     p.add_argument(
         "--planners",

@@ -43,6 +43,7 @@ from typing import Any
 
 from planner.bench_courses import (
     COURSE_GOALS,
+    COURSE_GROUPS_HELP,
     COURSES,
     GOAL_XY,
     START_XY,
@@ -662,9 +663,7 @@ def add_physics_parser(bench_sub) -> argparse.ArgumentParser:
     p.add_argument(
         "--courses",
         default="named",
-        help="comma-separated terrains; 'named' = the 9 first courses, 'hard' = issue 15's 8, "
-        "'backtrack' = step6cm, 'ladder' = the feature ladder (feat:KIND:SIZE, "
-        "planner.course_gen.LADDER)",
+        help=COURSE_GROUPS_HELP,
     )
     p.add_argument("--generated", type=int, default=GENERATED, help="generated courses")
     p.add_argument("--first-seed", type=int, default=0, help="seed of the first generated course")
