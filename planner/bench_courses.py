@@ -34,6 +34,7 @@ __all__ = [
     "HARD_COURSES",
     "PLANNERS",
     "expand_courses",
+    "own_goals_text",
     "goal_for",
     "add_courses_parser",
     "cmd_courses",
@@ -83,6 +84,11 @@ COURSE_GROUPS_HELP = (
     "'backtrack' = step6cm (soft dead-ends, recursive reaches), 'global' = issue 17's 3 "
     "(walls, rocks), 'ladder' = the feature ladder (feat:KIND:SIZE, planner.course_gen.LADDER)"
 )  # the groups of expand_courses, for the --courses of bench courses and bench physics
+
+
+def own_goals_text(courses) -> str:
+    """' (COURSE: to (x, y))' for each of ``courses`` with its own goal (COURSE_GOALS)."""
+    return "".join(f" ({k}: to {v})" for k, v in COURSE_GOALS.items() if k in courses)
 
 
 def expand_courses(names) -> tuple[str, ...]:
@@ -240,7 +246,7 @@ def render_markdown(result: dict[str, Any]) -> str:
         "# Course benchmark (`stratawalk bench courses`)",
         "",
         f"Walks from {tuple(c['start'])} to {tuple(c['goal'])} m"
-        + "".join(f" ({k}: to {v})" for k, v in COURSE_GOALS.items() if k in c["courses"])
+        + own_goals_text(c["courses"])
         + (
             " (generated and feature courses: to their own goals, past their last edge)"
             if any(str(k).startswith(("gen:", "feat:")) for k in c["courses"])

@@ -42,13 +42,13 @@ from pathlib import Path
 from typing import Any
 
 from planner.bench_courses import (
-    COURSE_GOALS,
     COURSE_GROUPS_HELP,
     COURSES,
     GOAL_XY,
     START_XY,
     expand_courses,
     goal_for,
+    own_goals_text,
 )
 from planner.errors import InputError
 from planner.outputs import write_atomic
@@ -473,7 +473,7 @@ def render_markdown(result: dict[str, Any]) -> str:
         " from "
         f"{tuple(c['start'])} to {tuple(c['goal_named'])} m on the "
         f"named courses"
-        + "".join(f" ({k}: to {v})" for k, v in COURSE_GOALS.items() if k in c.get("courses", ()))
+        + own_goals_text(c.get("courses", ()))
         + f", to the end of the course minus 0.4 m on the generated ones "
         f"(`planner/course_gen.py`, difficulty {c['difficulty']:g}), time budget "
         f"{c['time_budget_s']:g} s; each plan executed in MuJoCo at time scale "
