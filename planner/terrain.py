@@ -664,14 +664,18 @@ class _SteppingStones(_Kind):
             centres.append((cx, cy))
             tops.append(float(row[2]) if len(row) == 3 else self.height + float(jitter[i]))
         c = np.array(centres)
-        near = np.all(np.abs(c[:, None, :] - c[None, :, :]) < self.size, axis=-1)
-        np.fill_diagonal(near, False)
-        if near.any():
-            i, j = (int(k) for k in np.argwhere(near)[0])
-            raise f.fail(
-                f"stones[{j}]",
-                f"overlaps stones[{i}] (stones of side {self.size} must not overlap); move it",
-            )
+        order = np.argsort(c[:, 0], kind="stable")  # a sweep along x, not an S x S table
+        xs = c[order, 0]
+        ends = np.searchsorted(xs, xs + self.size, side="left")
+        for a, (i, end) in enumerate(zip(order, ends, strict=True)):
+            later = order[a + 1 : end]
+            hit = later[np.abs(c[later, 1] - c[i, 1]) < self.size]
+            if hit.size:
+                j, k = sorted((int(i), int(hit[0])))
+                raise f.fail(
+                    f"stones[{k}]",
+                    f"overlaps stones[{j}] (stones of side {self.size} must not overlap); move it",
+                )
         del self.spec["gap"]
         self.spec["stones"] = [list(map(float, r)) for r in rows]
         self.xa, self.ya = c[:, 0] - self.size / 2, c[:, 1] - self.size / 2
@@ -695,12 +699,17 @@ class _SteppingStones(_Kind):
         """-depth in the pit, the stone's top on a stone, 0 outside."""
         x0, x1, y0, y1 = self.region
         z = -self.depth * _box_sharp(u, x0, x1) * _box_sharp(y, y0, y1)
-        if self.placed:  # the highest stone under each point
-            uu, yy = np.asarray(u, float)[..., None], np.asarray(y, float)[..., None]
-            on = (uu >= self.xa) & (uu < self.xa + self.size)
-            on &= (yy >= self.ya) & (yy < self.ya + self.size)
-            top = np.where(on, self.tops, -np.inf).max(axis=-1)
-            return np.where(on.any(axis=-1), top, z)
+        if self.placed:  # the highest stone under each point, points by the chunk
+            uf, yf = (a.reshape(-1) for a in np.broadcast_arrays(np.asarray(u, float), y))
+            top = np.full(uf.shape, -np.inf)
+            rows = max(1, _CHUNK // self.tops.size)
+            for i in range(0, uf.size, rows):
+                uu, yy = uf[i : i + rows, None], yf[i : i + rows, None]
+                on = (uu >= self.xa) & (uu < self.xa + self.size)
+                on &= (yy >= self.ya) & (yy < self.ya + self.size)
+                top[i : i + rows] = np.where(on, self.tops, -np.inf).max(axis=-1)
+            top = top.reshape(np.shape(z))
+            return np.where(np.isfinite(top), top, z)
         i = np.searchsorted(self.xa, u, side="right") - 1
         j = np.searchsorted(self.ya, y, side="right") - 1
         ic, jc = np.clip(i, 0, None), np.clip(j, 0, None)
