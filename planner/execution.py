@@ -198,6 +198,20 @@ REPLAN_BUDGET_S = 120.0  # planning time of one such re-plan [s] (the robot stan
 MAX_ARRIVALS = 2  # arrival moves (four feet, COM over the goal) tried from measured states
 
 
+def _step_keyframes(plan: Plan) -> list[tuple[int, int, int]]:
+    """(swing keyframe, 0-based leg, keyframe with the leg down again) of each step."""
+    kfs = plan.keyframes
+    out = []
+    for k, kf in enumerate(kfs[:-1]):
+        leg = int(kf.stratum) - 1
+        if leg < 0:
+            continue
+        nxt = next((j for j in range(k + 1, len(kfs)) if leg + 1 in kfs[j].support), None)
+        if nxt is not None:
+            out.append((k, leg, nxt))
+    return out
+
+
 def planned_steps(plan: Plan) -> list[tuple[int, _Array]]:
     """The plan's steps in order: (0-based leg, the terrain point it lands on, world [m]).
 
@@ -205,15 +219,27 @@ def planned_steps(plan: Plan) -> list[tuple[int, _Array]]:
     down again; its contact point there is the foothold.
     """
     kfs = plan.keyframes
-    out = []
-    for k, kf in enumerate(kfs[:-1]):
-        leg = int(kf.stratum) - 1
-        if leg < 0:
-            continue
-        nxt = next((f for f in kfs[k + 1 :] if leg + 1 in f.support), None)
-        if nxt is not None:
-            out.append((leg, np.asarray(nxt.feet[leg], float).copy()))
-    return out
+    return [
+        (leg, np.asarray(kfs[j].feet[leg], float).copy()) for _, leg, j in _step_keyframes(plan)
+    ]
+
+
+def planned_knees(plan: Plan) -> list[int]:
+    """The knee branch each of the plan's steps lands on, aligned with :func:`planned_steps`.
+
+    +1 forward, -1 rearward (:meth:`planner.kinematics.LegKinematics.knee_direction`) in
+    the keyframe that has the leg down again. The feedback's steps land on the plan's
+    branch: where a knee's choice (:meth:`LocalPlanner._other_knee_landing`) is close, a
+    state a few millimetres off the plan's flips it, and the plan's next steps, found
+    with the plan's branch, then find no body move.
+    """
+    from planner.kinematics import kinematics_of
+
+    kin = kinematics_of(plan.load_robot())
+    states = plan.keyframe_states()
+    return [
+        kin.knee_direction(leg, states[j].joints_rad[leg]) for _, leg, j in _step_keyframes(plan)
+    ]
 
 
 def planned_body_poses(plan: Plan) -> list:
@@ -360,7 +386,7 @@ def run_feedback(
     max_cycles = max_cycles if max_cycles is not None else 2 * n_plan + 20
     queue = GaitQueue(st.gait)
     guide, g, followed, corrected = planned_steps(plan), 0, 0, 0
-    guide_poses = planned_body_poses(plan)
+    guide_poses, guide_knees = planned_body_poses(plan), planned_knees(plan)
     guide_cycles = plan_step_cycles(plan) if correct_plan_steps else None
     s_plan, centres = plan.samples, plan.foot_centres_W()
     step_scale = {i: 1.0 for i in range(4)}
@@ -422,7 +448,7 @@ def run_feedback(
                 for _, shrink in BACKOFF:
                     step = local.step(
                         state, leg, tau, local.stride_m(), shrink, guide[g][1], False,
-                        body_hint=guide_poses[g],
+                        body_hint=guide_poses[g], knee=guide_knees[g],
                     )  # fmt: skip
                     if step.ok:
                         on_plan = True
@@ -477,6 +503,7 @@ def run_feedback(
                     replans.append(0 if new is None else len(planned_steps(new)))
                 if new is not None:
                     guide, guide_poses = planned_steps(new), planned_body_poses(new)
+                    guide_knees = planned_knees(new)
                     guide_cycles = plan_step_cycles(new) if correct_plan_steps else None
                     s_plan, centres, g, fails = new.samples, new.foot_centres_W(), 0, 0
                 elif guided and fails >= GUIDE_FAILS:  # the plan's steps no longer fit

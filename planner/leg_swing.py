@@ -50,6 +50,7 @@ ROLL_LEVELS = 3  # values of hip roll over its range (plus its lift and touch-do
 LINK_MARGIN_M = 0.002  # a free configuration keeps thigh and shank this far above the terrain
 FOOT_MARGIN_M = 0.005  # ... and the foot sphere this far
 LIFT_M = 0.01  # pre-poses: the sphere centre this far up the terrain normal
+PRE_LIFTS_M = (LIFT_M, 0.0075, 0.006)  # ... or less, where the knee's limit is near
 LAZY_ROUNDS = 20  # shortest paths tried while their edges turn out blocked
 SEGMENT_STEP_RAD = 0.03  # straight joint segments are checked every this much
 
@@ -102,18 +103,25 @@ class _Free:
 
 
 def _pre_pose(free: _Free, state: State, leg: int) -> _Array | None:
-    """Joints with the sphere LIFT_M up the terrain normal from its contact (same knee)."""
+    """Joints with the sphere LIFT_M up the terrain normal from its contact (same knee).
+
+    Where the knee's branch does not reach that far (a knee near its limit: LittleDog's
+    hind knees bend rearward to -1 rad only) the lower ``PRE_LIFTS_M``, each clear of
+    ``FOOT_MARGIN_M``; None when none is reachable on the branch and free. Taking the
+    other branch there (as IK offers) made the last straight joint segment flip the knee
+    with the foot 2 cm into the ground.
+    """
     kin = free.kin
     c = foot_centre_from_contact(free.terrain, state.feet_W[leg], free.rho)
     n = np.asarray(free.terrain.normal(state.feet_W[leg]), float).reshape(3)
-    up = c + LIFT_M * n
     th = state.joints_rad[leg]
-    ik = kin.ik_leg(
-        leg, free.R.T @ (up - free.p), reference_rad=th, knee=kin.knee_direction(leg, th)
-    )
-    if not ik.reachable or not free(ik.joints_rad[None])[0]:
-        return None
-    return ik.joints_rad
+    knee = kin.knee_direction(leg, th)
+    for lift in PRE_LIFTS_M:
+        up = c + lift * n
+        ik = kin.ik_leg(leg, free.R.T @ (up - free.p), reference_rad=th, knee=knee)
+        if ik.reachable and not ik.knee_flipped and free(ik.joints_rad[None])[0]:
+            return ik.joints_rad
+    return None
 
 
 def _shortcut(free: _Free, way: list[_Array]) -> list[_Array]:

@@ -108,6 +108,59 @@ class TorqueCheck:
             np.isfinite(self.effort), self.effort, finite.max() if finite.size else 1.0
         )
 
+    def _contact_jacobian_T(self, q: _Array, support, normals_W: _Array) -> _Array:
+        """(nv, 3 k) generalized force of the contact forces on ``support``, stacked."""
+        model, data = self.model, self.data
+        rho = self.robot.foot_radius_m
+        n = np.asarray(normals_W, float).reshape(4, 3)[list(support)]
+        pin.computeJointJacobians(model, data, q)
+        pin.updateFramePlacements(model, data)
+        jac = np.zeros((3 * len(n), model.nv))
+        for j, i in enumerate(support):
+            J = pin.getFrameJacobian(model, data, self.foot_ids[i], pin.LOCAL_WORLD_ALIGNED)
+            d = -rho * n[j]  # contact point minus sphere centre
+            hat = np.array([[0, -d[2], d[1]], [d[2], 0, -d[0]], [-d[1], d[0], 0]])
+            jac[3 * j : 3 * j + 3] = J[:3] - hat @ J[3:]
+        return jac.T
+
+    def commanded_ratio_map(self, q: _Array, support, normals_W: _Array) -> _Array:
+        """(12, 3) map M with tau_j / effort_j = (M @ g_W)_j in the commanded distribution.
+
+        The effort-weighted least-squares forces of :meth:`solve` (``least_squares``)
+        without the friction cones (the same wherever they lie inside them) balance the
+        generalized gravity, which is linear in the gravity vector g_W; so are they and
+        the joint torques. With g_W - a (a body moving at the acceleration a, every joint
+        held: d'Alembert, exact for the generalized forces) it gives the torques the
+        motion needs (:meth:`planner.local.base.LocalPlanner.body_offsets_s`). Joints
+        without a finite effort limit map to 0.
+        """
+        model, data = self.model, self.data
+        q = np.asarray(q, float)
+        sup = [int(i) for i in support]
+        jt = self._contact_jacobian_T(q, sup, normals_W)
+        saved = model.gravity.linear.copy()
+        try:
+            gens = []
+            for e in np.eye(3):
+                model.gravity.linear = e
+                gens.append(pin.computeGeneralizedGravity(model, data, q).copy())
+        finally:
+            model.gravity.linear = saved
+        g = np.column_stack(gens)  # (nv, 3): generalized gravity per unit gravity component
+        base = np.setdiff1d(np.arange(model.nv), self.v_idx)
+        a = self.weights[:, None] * jt[self.v_idx]  # W J^T (12, 3k)
+        b = jt[base]  # balance rows (6, 3k)
+        nf = jt.shape[1]
+        kkt = np.zeros((nf + len(base), nf + len(base)))
+        kkt[:nf, :nf] = 2.0 * a.T @ a
+        kkt[:nf, nf:] = b.T
+        kkt[nf:, :nf] = b
+        rhs = np.vstack([2.0 * a.T @ (self.weights[:, None] * g[self.v_idx]), g[base]])
+        f = np.linalg.lstsq(kkt, rhs, rcond=None)[0][:nf]  # (3k, 3)
+        tau = g[self.v_idx] - jt[self.v_idx] @ f
+        scale = np.where(np.isfinite(self.effort), 1.0 / self.effort, 0.0)
+        return scale[:, None] * tau
+
     def solve(
         self, q: _Array, support, mu: float, normals_W: _Array, least_squares: bool = False
     ) -> TorqueFeasibility:
@@ -126,18 +179,9 @@ class TorqueCheck:
         q = np.asarray(q, float)
         sup = [int(i) for i in support]
         k = len(sup)
-        rho = self.robot.foot_radius_m
         n = np.asarray(normals_W, float).reshape(4, 3)[sup]
         g = pin.computeGeneralizedGravity(model, data, q)
-        pin.computeJointJacobians(model, data, q)
-        pin.updateFramePlacements(model, data)
-        jac = np.zeros((3 * k, model.nv))  # contact-point Jacobians, stacked
-        for j, i in enumerate(sup):
-            J = pin.getFrameJacobian(model, data, self.foot_ids[i], pin.LOCAL_WORLD_ALIGNED)
-            d = -rho * n[j]  # contact point minus sphere centre
-            hat = np.array([[0, -d[2], d[1]], [d[2], 0, -d[0]], [-d[1], d[0], 0]])
-            jac[3 * j : 3 * j + 3] = J[:3] - hat @ J[3:]
-        jt = jac.T  # (nv, 3k): generalized force of the contact forces
+        jt = self._contact_jacobian_T(q, sup, normals_W)  # (nv, 3k)
         base = [r for r in range(model.nv) if r not in set(self.v_idx.tolist())]
         limited = [c for c in range(12) if math.isfinite(self.effort[c])]
         nv = 3 * k + 1  # forces, then s

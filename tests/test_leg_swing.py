@@ -125,3 +125,42 @@ def test_a_swing_searched_around_an_edge_is_timed_slower(littledog, over_the_bar
         ratio = (np.abs(np.diff(th, axis=0)) / dt[:, None] / vmax).max()
         assert ratio <= fraction * (1 + 1e-9)
     assert slow[-1] > fast[-1]
+
+
+def test_a_knee_flip_near_its_limit_keeps_the_foot_above_the_ground(littledog):
+    """A landing on a knee branch near its joint limit is entered from above, on that branch.
+
+    step10cm's feedback (8.3) landed HR on its rearward branch (the plan's) with the knee at
+    -0.83 rad, where the 1 cm pre-pose up the normal needs more than the -1 rad limit. IK
+    then offered the forward branch, and the last joint segment flipped the knee with the
+    foot sphere 2 cm into the ground. The validator's distance is the reference.
+    """
+    from planner.lie import rotation_from_quat
+    from planner.terrain import load_terrain
+
+    terrain = load_terrain("step10cm")
+    kin = kinematics_of(littledog)
+    body = np.array([0.807569, 0.021996, 0.196957])
+    R = rotation_from_quat(np.array([0.005792, -0.234885, 0.002281, 0.972003]))
+    feet = np.array([[0.849193, 0.069611, 0.1], [0.845649, -0.067087, 0.1],
+                     [0.738466, 0.061252, 0.0], [0.635022, -0.063706, 0.0]])  # fmt: skip
+    joints = np.array([[-0.206161, 1.642804, -1.620878], [-0.244638, 1.478193, -1.420171],
+                       [-0.210435, -0.461581, 1.611047],
+                       [-0.22353, 0.582006, 0.926549]])  # fmt: skip
+    lift = State(body, R, feet, joints, stratum=4, support=(0, 1, 2))
+    touch_feet, touch_joints = feet.copy(), joints.copy()
+    touch_feet[3] = [0.75875, -0.065133, 0.0]
+    touch_joints[3] = [-0.155103, 0.826036, -0.834445]  # rearward, 0.17 rad from the limit
+    touch = State(body, R, touch_feet, touch_joints, stratum=0, support=(0, 1, 2, 3))
+    for s in (lift, touch):  # the states are consistent: each foot where its joints put it
+        centre = R @ kin.foot_B(3, s.joints_rad[3]) + body
+        assert np.linalg.norm(centre - s.feet_W[3] - [0, 0, littledog.foot_radius_m]) < 1e-4
+    assert kin.knee_direction(3, touch_joints[3]) != kin.knee_direction(3, joints[3])
+    path = joint_space_swing(littledog, terrain, lift, touch, 24, 3)
+    assert path is not None
+    rho = littledog.foot_radius_m
+    for s in path[1:-1]:
+        centre = R @ kin.foot_B(3, s.joints_rad[3]) + body
+        assert sharp_surface_distance(terrain, centre[None], 0.05, step_m=1e-3)[0] >= rho
+    # the knee changes branch in the air: the foot's last samples are on the landing's
+    assert kin.knee_direction(3, path[-2].joints_rad[3]) == kin.knee_direction(3, touch_joints[3])

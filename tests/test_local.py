@@ -89,9 +89,9 @@ def test_failed_step_is_retried_from_the_queue(flat_planner, monkeypatch):
     real_swing = planner.swing
     failed = {"FL": False}
 
-    def swing(state, leg, tau, step_m, target=None):
+    def swing(state, leg, tau, step_m, target=None, knee=None):
         attempts.append(leg)
-        sol, path = real_swing(state, leg, tau, step_m, target)
+        sol, path = real_swing(state, leg, tau, step_m, target, knee)
         if leg == 3:
             failed["FL"] = True
         if leg == 0 and not failed["FL"]:  # force FL's placements to fail until HR went

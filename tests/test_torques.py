@@ -130,6 +130,41 @@ def test_least_squares_torques_are_the_equality_constrained_optimum(flat_plan, l
         assert res.ratio >= tc.solve(q, sup, 5.0, up).ratio - 1e-7
 
 
+def test_commanded_ratio_map_carries_a_body_acceleration(flat_plan, littledog):
+    """commanded_ratio_map (closed form, linear in gravity) against the SOCP and RNEA.
+
+    A body accelerating at a with its joints held needs the generalized forces of gravity
+    g - a (d'Alembert; RNEA with the base's acceleration is the reference), and the map
+    gives the commanded distribution's torques for any gravity vector: the SOCP's
+    (Clarabel, wide cones) solved with the model's gravity set to g - a.
+    """
+    tc = TorqueCheck(littledog)
+    up = np.tile([0.0, 0.0, 1.0], (4, 1))
+    model, data = littledog.model, littledog.model.createData()
+    g0 = model.gravity.linear.copy()
+    accel_W = np.array([0.4, -0.7, 0.3])  # [m/s^2]
+    for k in (0, len(flat_plan.samples) // 2):  # a four-leg and a three-leg stance
+        q = flat_plan.samples.q[k]
+        sup = np.flatnonzero(flat_plan.samples.contact[k])
+        M = tc.commanded_ratio_map(q, sup, up)
+        assert np.allclose(model.gravity.linear, g0)  # the model's gravity is left as it was
+        R = pin.Quaternion(q[6], q[3], q[4], q[5]).toRotationMatrix()
+        a = np.zeros(model.nv)
+        a[:3] = R.T @ accel_W  # the free flyer's acceleration, in the base frame
+        dyn = pin.rnea(model, data, q, np.zeros(model.nv), a)
+        try:
+            model.gravity.linear = g0 - accel_W
+            np.testing.assert_allclose(
+                pin.computeGeneralizedGravity(model, data, q), dyn, atol=1e-9
+            )
+            for gravity in (g0, g0 - accel_W):
+                model.gravity.linear = gravity
+                res = tc.solve(q, sup, 5.0, up, least_squares=True)
+                np.testing.assert_allclose(M @ gravity, res.torques_nm / tc.effort, atol=1e-5)
+        finally:
+            model.gravity.linear = g0
+
+
 def test_symbolic_least_squares_torques_equal_the_socp(flat_plan, littledog):
     """least_squares_ratios_ca (CasADi, Theta2's torque rows) against TorqueCheck (Clarabel).
 

@@ -737,10 +737,22 @@ class LocalPlanner:
         second = interpolate_leaf(self.robot, self.terrain, first[-1], end2, n)
         return first + second[1:]
 
-    def swing(self, state: State, leg: int, tau: Trajectory, step_m: float, target_W=None):
+    def swing(
+        self,
+        state: State,
+        leg: int,
+        tau: Trajectory,
+        step_m: float,
+        target_W=None,
+        knee: int | None = None,
+    ):
         """Theta3 for ``leg`` toward ``target_W`` (default Lambda_t); returns (solution, samples).
 
         A swing path that leaves the leg's reach is retried once with half the clearance.
+        ``knee`` (+1 forward, -1 rearward: :meth:`LegKinematics.knee_direction`): the knee
+        branch to land on (a precomputed plan's, 8.3), instead of
+        :meth:`_other_knee_landing`'s choice; the swing fails where it cannot land there
+        (the feedback then tries a body nearer the support's incentre).
         """
         if target_W is None:
             target_W = lambda_t(self.robot, self.terrain, state, leg, tau, step_m=step_m)
@@ -775,12 +787,20 @@ class LocalPlanner:
             sol.feasible = False
             sol.diagnosis = f"foothold of {LEG_NAMES[leg]} has {hazard}"
             return sol, []
-        other = self._other_knee_landing(touch, leg)
+        other = self._other_knee_landing(touch, leg, knee)
         if other is not None:  # a knee over an edge: land on the branch that clears it
             path, why = self._joint_space_swing(lifted, other, leg)
             if not why:
                 sol.state = self.path_end(path, tuple(range(4)))
                 return sol, path
+        if knee is not None and self.kin.knee_direction(leg, touch.joints_rad[leg]) != knee:
+            # the branch asked for (a plan's) or none: the plan's next steps assume it
+            sol.feasible = False
+            sol.diagnosis = (
+                f"swing of {LEG_NAMES[leg]}: no landing on the plan's knee branch from here"
+                + (f" ({why})" if other is not None else " (out of reach on it)")
+            )
+            return sol, []
         clearance = self.swing_clearance_m(lifted, leg, touch.feet_W[leg])
         for clr in (clearance, 0.5 * clearance):
             path = interpolate_swing(
@@ -819,7 +839,7 @@ class LocalPlanner:
         self._count("swing_joint_space", not why)
         return path, why
 
-    def _other_knee_landing(self, touch: State, leg: int) -> State | None:
+    def _other_knee_landing(self, touch: State, leg: int, want: int | None = None) -> State | None:
         """``touch`` with ``leg`` on its other knee branch, where that clears an edge better.
 
         Beyond the paper: a leg that lands next to a tall edge with its knee over it (a
@@ -835,7 +855,27 @@ class LocalPlanner:
         to a tall edge (terrain within half the leg's reach ``KNEE_CHOICE_EDGE_M`` above
         the foothold: a barrier, a tall riser): on stepping stones it flipped knees over
         their few centimetres of height and the open-loop walk fell.
+
+        ``want`` (+1/-1): the branch to land on, chosen before (the precomputed plan's, 8.3:
+        from a state a few millimetres off, step10cm's feedback landed HR on the other
+        branch, and the plan's next steps found no body move from there); None when
+        ``touch`` is on it or the leg cannot reach its foot on it.
         """
+        if want is not None:
+            th = touch.joints_rad[leg]
+            if self.kin.knee_direction(leg, th) == int(want):
+                return None
+            R = touch.base_rotation_W
+            centre = R @ self.kin.foot_B(leg, th) + touch.base_position_W
+            ik = self.kin.ik_leg(
+                leg, R.T @ (centre - touch.base_position_W), reference_rad=th, knee=int(want)
+            )
+            if not ik.reachable or ik.knee_flipped:
+                return None
+            other = touch.copy()
+            other.joints_rad = touch.joints_rad.copy()
+            other.joints_rad[leg] = ik.joints_rad
+            return other
         links = leg_links(self.robot)
         mine = np.array([links.capsules[c].leg == leg for c in links.owner])
         R = touch.base_rotation_W
@@ -1183,6 +1223,7 @@ class LocalPlanner:
         target_W=None,
         try_others: bool = True,
         body_hint: State | None = None,
+        knee: int | None = None,
     ) -> Step:
         """One step of ``leg`` from ``state``: body move (swing-ready), swing, placement.
 
@@ -1202,8 +1243,9 @@ class LocalPlanner:
         precomputed plan's), instead of Lambda_t's; ``try_others`` False: no other
         foothold is tried. ``body_hint``: a body pose near the one expected for the first
         foothold (the precomputed plan's, feedback 8.3), Theta2's last starting point.
+        ``knee``: the knee branch the leg lands on (the precomputed plan's, :meth:`swing`).
         """
-        args = (state, leg, tau, step_m, shrink, target_W, try_others, body_hint)
+        args = (state, leg, tau, step_m, shrink, target_W, try_others, body_hint, knee)
         first = self._step_once(*args)
         if first.ok or not self.settings.follow_support or self._sink:
             return first
@@ -1226,6 +1268,7 @@ class LocalPlanner:
         target_W,
         try_others,
         body_hint: State | None = None,
+        knee: int | None = None,
     ) -> Step:
         """One attempt of :meth:`step` at the body height in force."""
         if target_W is not None:
@@ -1256,7 +1299,9 @@ class LocalPlanner:
             if not sol2.feasible:
                 step = Step(leg, False, state, None, None, [], [], "body_move", sol2.diagnosis)
             else:
-                sol3, swing_path = self.swing(sol2.state, leg, tau, step_m, target)
+                sol3, swing_path = self.swing(
+                    sol2.state, leg, tau, step_m, target, knee if k == 0 else None
+                )
                 if sol3.feasible:
                     made = Step(leg, True, state, sol2.state, sol3.state, body_path, swing_path)
                     if (
@@ -1584,7 +1629,15 @@ class LocalPlanner:
         at 1.5 m/s^2 toward an edge 2.9 cm from its COM (the ZMP 6 mm from it) tipped the
         robot over it in MuJoCo, as no swing keeping 21 mm ever did
         (:mod:`planner.stability`). The tip part counts in N as the horizontal force that
-        would use what is left of it (m g x margin / COM height).
+        would use what is left of it (m g x margin / COM height). And the joint torques of
+        the commanded force distribution with gravity g - a u
+        (:meth:`planner.torques.TorqueCheck.commanded_ratio_map`, on the legs that hold
+        the sample: the three of the next swing at a move's end) use at most
+        ``CARRIED_SHARE`` of the headroom between the sample's ratio at rest and
+        ``TORQUE_FRACTION`` (counted as m g x the ratio): barrier9cm's recursive plan
+        braked a 3.8 cm sway at 0.5 m/s^2 onto a three-leg stance with the FL knee at 72 %
+        (88 % while braking), the knee saturated in MuJoCo and the robot fell; with that
+        move taking twice as long it held.
         >= 0: the stance carries the motion.
         """
         from planner.stability import tip_margin_m
@@ -1609,9 +1662,23 @@ class LocalPlanner:
 
         floors: dict[int, float] = {}
         tip_floors: dict[int, tuple[float, float]] = {}
+        torque_maps: dict[int, tuple[np.ndarray, float]] = {}
 
         def tip(j: int, g) -> float:
             return tip_margin_m(path[j].feet_W[path[j].in_contact], com[j], g)
+
+        def torque(j: int, g) -> float:
+            """Torque headroom [N, as m g x the ratio] of sample j carrying gravity g."""
+            if j not in torque_maps:
+                s = path[j]
+                q = self.robot.q_from(s.base_position_W, s.base_quaternion_xyzw, s.joints_rad)
+                tmap = self.torques.commanded_ratio_map(
+                    q, _holding_legs(path, j), normals[j]
+                )  # fmt: skip
+                still = float(np.abs(tmap @ g_W).max())
+                torque_maps[j] = (tmap, still + CARRIED_SHARE * max(TORQUE_FRACTION - still, 0.0))
+            tmap, allowed = torque_maps[j]
+            return (allowed - float(np.abs(tmap @ g).max())) * m * 9.81
 
         def margin(k: int, a: float) -> float:
             out = np.inf
@@ -1627,7 +1694,7 @@ class LocalPlanner:
                     tip_floors[j] = (floor, m * 9.81 / height)
                 g = g_W - a * u[k]
                 floor, per_m = tip_floors[j]
-                out = min(out, raw(j, g) - floors[j], (tip(j, g) - floor) * per_m)
+                out = min(out, raw(j, g) - floors[j], (tip(j, g) - floor) * per_m, torque(j, g))
             return out
 
         return margin
