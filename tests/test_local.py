@@ -554,3 +554,27 @@ def test_a_planner_stopped_after_tracing_back_keeps_the_walk_that_came_nearest(l
     assert plan.stats["steps"] >= 4
     assert _max_sliding(littledog, terrain, plan.samples) < 1e-6
     assert np.all(np.diff(plan.times) > 0)
+
+
+@pytest.mark.parametrize("leg", [0, 3])
+def test_a_step_asked_for_a_knee_branch_lands_on_it_or_fails(flat_planner, leg):
+    """``step(..., knee=)`` (the feedback's plan branch, 8.3): never the other branch.
+
+    On flat ground the planner's own choice keeps each leg's branch; asked for it, the same
+    step; asked for the other, the swing flips the knee in the air (joint space) or the
+    step fails saying so. Either way the landing is never on the branch not asked for.
+    """
+    planner = SoftPlanner(flat_planner.robot, flat_planner.terrain)
+    kin = planner.kin
+    tau = Trajectory.straight([0.2, 0.0], [1.0, 0.0], planner.terrain, planner.com_height_m())
+    start = planner.initial_state([0.2, 0.0], tau)
+    plain = planner.step(start, leg, tau, planner.stride_m())
+    assert plain.ok, plain.diagnosis
+    own = kin.knee_direction(leg, plain.end.joints_rad[leg])
+    same = planner.step(start, leg, tau, planner.stride_m(), knee=own)
+    assert same.ok and np.allclose(same.end.joints_rad, plain.end.joints_rad)
+    other = planner.step(start, leg, tau, planner.stride_m(), knee=-own)
+    if other.ok:
+        assert kin.knee_direction(leg, other.end.joints_rad[leg]) == -own
+    else:
+        assert "knee branch" in other.diagnosis
