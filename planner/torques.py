@@ -101,6 +101,7 @@ class TorqueCheck:
         self.v_idx = np.array(
             [self.model.joints[self.model.getJointId(n)].idx_v for n in robot.joint_names]
         )
+        self.base_idx = np.setdiff1d(np.arange(self.model.nv), self.v_idx)  # free-flyer rows
         self.effort = joint_efforts_nm(robot)
         finite = self.effort[np.isfinite(self.effort)]
         # least squares in torque / effort (unlimited joints weigh as the strongest limited one)
@@ -147,7 +148,7 @@ class TorqueCheck:
         finally:
             model.gravity.linear = saved
         g = np.column_stack(gens)  # (nv, 3): generalized gravity per unit gravity component
-        base = np.setdiff1d(np.arange(model.nv), self.v_idx)
+        base = self.base_idx
         a = self.weights[:, None] * jt[self.v_idx]  # W J^T (12, 3k)
         b = jt[base]  # balance rows (6, 3k)
         nf = jt.shape[1]
@@ -182,7 +183,7 @@ class TorqueCheck:
         n = np.asarray(normals_W, float).reshape(4, 3)[sup]
         g = pin.computeGeneralizedGravity(model, data, q)
         jt = self._contact_jacobian_T(q, sup, normals_W)  # (nv, 3k)
-        base = [r for r in range(model.nv) if r not in set(self.v_idx.tolist())]
+        base = self.base_idx
         limited = [c for c in range(12) if math.isfinite(self.effort[c])]
         nv = 3 * k + 1  # forces, then s
         rows, b, cones = [], [], []

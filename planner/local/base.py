@@ -865,17 +865,10 @@ class LocalPlanner:
             th = touch.joints_rad[leg]
             if self.kin.knee_direction(leg, th) == int(want):
                 return None
-            R = touch.base_rotation_W
-            centre = R @ self.kin.foot_B(leg, th) + touch.base_position_W
-            ik = self.kin.ik_leg(
-                leg, R.T @ (centre - touch.base_position_W), reference_rad=th, knee=int(want)
-            )
+            ik = self.kin.ik_leg(leg, self.kin.foot_B(leg, th), reference_rad=th, knee=int(want))
             if not ik.reachable or ik.knee_flipped:
                 return None
-            other = touch.copy()
-            other.joints_rad = touch.joints_rad.copy()
-            other.joints_rad[leg] = ik.joints_rad
-            return other
+            return _with_leg_joints(touch, leg, ik.joints_rad)
         links = leg_links(self.robot)
         mine = np.array([links.capsules[c].leg == leg for c in links.owner])
         R = touch.base_rotation_W
@@ -929,10 +922,7 @@ class LocalPlanner:
         better, joints = clearance(-own)
         if joints is None or better < have + KNEE_CHOICE_GAIN_M:
             return None
-        other = touch.copy()
-        other.joints_rad = touch.joints_rad.copy()
-        other.joints_rad[leg] = joints
-        return other
+        return _with_leg_joints(touch, leg, joints)
 
     def path_problem(self, path: list[State]) -> str:
         """Why a sampled leaf path is not executable, or "": reach and balance per sample.
@@ -1770,6 +1760,14 @@ class LocalPlanner:
         for s, t in zip(path[1:], at_s, strict=True):
             samples.append(s)
             times.append(float(t))
+
+
+def _with_leg_joints(state: State, leg: int, joints_rad) -> State:
+    """A copy of ``state`` with ``leg``'s joints replaced (the same foot, another branch)."""
+    out = state.copy()
+    out.joints_rad = state.joints_rad.copy()
+    out.joints_rad[leg] = joints_rad
+    return out
 
 
 def _holding_legs(path: list[State], k: int) -> np.ndarray:
