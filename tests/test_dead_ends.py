@@ -14,8 +14,9 @@ Whether the retraced walk then climbs is not asserted: on another machine (2026-
 the same code and packages, planning 1.4x slower) the third retrace met the same stance
 and the walk stopped 135 cm short, 34 steps, whatever the time budget (120 or 600 s). The
 outcome at this trap turns on digits the machine's arithmetic decides; what holds is that
-the dead end is met, traced back at least once, and the walk kept is the nearest one and
-passes the independent check.
+the dead end is met, traced back at least once, and the walk kept ends with the front
+feet up the step (the walk that came nearest, not the one rewound) and passes the
+independent check.
 """
 
 import numpy as np
