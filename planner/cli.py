@@ -418,7 +418,7 @@ def build_parser() -> argparse.ArgumentParser:
     from planner.batch import add_batch_parser
 
     add_batch_parser(sub)
-    from planner.course_gen import add_generate_parser
+    from planner.generate_course import add_generate_parser
 
     add_generate_parser(sub)
     _add_export_parser(sub)

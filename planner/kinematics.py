@@ -27,7 +27,7 @@ from scipy.optimize import least_squares
 from planner import paden_kahan as pk
 
 if TYPE_CHECKING:
-    from planner.robot import Leg, Robot
+    from planner.robot_model import Leg, Robot
 
 AXES_INTERSECT_TOL_M = 1e-9
 NOMINAL_DEPTH_FRACTION = 0.8  # theta_nor puts the foot at 80 % of the leg's vertical reach
