@@ -19,11 +19,16 @@ its next foothold. Where the greedy steps lead into a dead end (``RETRACE_FAILS`
 attempts in a row, or ``no_progress_cycles / 2`` cycles without progress) the walk is
 traced back ``RETRACE_STEPS`` steps before its best point and those steps are planned
 again with the foothold look-ahead of the recursive planner (8.5): each foothold must leave
-the next leg a body move. A dead end met again at the same point is traced back again with
-8.5's less ambitious moves, shorter strides (``RETRACE_STRIDES``), and only when none is
-left does it stop the planner. On step10cm the full strides put the front feet up the step
-with the hind feet stretched below, a stance no hind body move leaves; planned again alike
-it met the same dead end, at 0.6 of the stride it climbs. The first retrace keeps the full
+the next leg a body move. A dead end met again at the same point is traced back again,
+``RETRACE_STEPS`` farther each time, with 8.5's less ambitious moves, shorter strides
+(``RETRACE_STRIDES``), and only when none is left does it stop the planner. On step10cm
+the full strides put the front feet up the step with the hind feet stretched below, a
+stance no hind body move leaves; planned again alike it met the same dead end. Its cause
+can lie before the steps retraced: a right hind foot left 14 cm before the riser a crawl
+cycle earlier, while the left one climbed (planned again from the same step with 0.6 and
+0.3 of the stride, the walk met the same stance), so each new retrace goes a crawl cycle
+farther back (with that, 66 steps, 3 retraces, where it stopped 135 cm short). The first
+retrace keeps the full
 stride: where one retrace sufficed the plans stay as they were (barrier9cm's soft plan,
 which walks in MuJoCo; its plan retraced at 0.6 fell there).
 """
@@ -84,8 +89,9 @@ class SoftPlanner(LocalPlanner):
                     lookahead_until = walk.steps + LOOKAHEAD_STEPS
                     at_best = max(k for k, h in enumerate(history) if h[2] <= run.best_at or k == 0)
                     retrace_k = max(at_best - RETRACE_STEPS, 0)
-                else:  # the same dead end again: from the same step, shorter strides
+                else:  # the same dead end again: a crawl cycle farther back, shorter strides
                     level += 1
+                    retrace_k = max(retrace_k - RETRACE_STEPS, 0)
                 k = min(retrace_k, len(history) - 1)
                 mark, legs, _ = history[k]
                 del history[k:]
