@@ -13,10 +13,10 @@ since the joint-space swings enter a landing on a knee near its limit from above
 On another machine (2026-11-26, the same code and packages, planning 1.4x slower) the
 second and third retraces, each from the same step as the first, met the same stance:
 the right hind foot had been left 14 cm before the riser a crawl cycle earlier, while the
-left climbed, and the walk stopped 135 cm short. Since a dead end met again is traced
-back one crawl cycle farther each time (:mod:`planner.local.soft`), the walk climbs
-there too (66 steps, 3 retraces). The test asserts the dead end is met, traced back,
-and the walk reaches the goal, passing the independent check.
+left climbed, and the walk stopped 135 cm short. With the 4th and 5th retraces starting
+one and two crawl cycles farther back (:data:`planner.local.soft.RETRACES`) it climbs
+there too (66 steps, 5 retraces). The test asserts the dead end is met, traced back, and
+the walk reaches the goal, passing the independent check.
 """
 
 import numpy as np

@@ -19,16 +19,18 @@ its next foothold. Where the greedy steps lead into a dead end (``RETRACE_FAILS`
 attempts in a row, or ``no_progress_cycles / 2`` cycles without progress) the walk is
 traced back ``RETRACE_STEPS`` steps before its best point and those steps are planned
 again with the foothold look-ahead of the recursive planner (8.5): each foothold must leave
-the next leg a body move. A dead end met again at the same point is traced back again,
-``RETRACE_STEPS`` farther each time, with 8.5's less ambitious moves, shorter strides
-(``RETRACE_STRIDES``), and only when none is left does it stop the planner. On step10cm
-the full strides put the front feet up the step with the hind feet stretched below, a
-stance no hind body move leaves; planned again alike it met the same dead end. Its cause
-can lie before the steps retraced: a right hind foot left 14 cm before the riser a crawl
-cycle earlier, while the left one climbed (planned again from the same step with 0.6 and
-0.3 of the stride, the walk met the same stance), so each new retrace goes a crawl cycle
-farther back (with that, 66 steps, 3 retraces, where it stopped 135 cm short). The first
-retrace keeps the full
+the next leg a body move. A dead end met again at the same point is traced back again
+with 8.5's less ambitious moves, shorter strides, and then from farther back
+(``RETRACES``), and only when none is left does it stop the planner. On step10cm the full
+strides put the front feet up the step with the hind feet stretched below, a stance no
+hind body move leaves; planned again alike it met the same dead end, and at 0.6 of the
+stride it climbed on one machine. On another its cause lay before the steps retraced: the
+right hind foot left 14 cm before the riser a crawl cycle earlier while the left one
+climbed, and from the same step at 0.6 and 0.3 of the stride the walk met the same stance
+(135 cm short); the 4th and 5th retraces start one and two crawl cycles farther back (it
+climbs at the 5th: 66 steps). They come after the first three, so a walk that got out
+with those is planned as before (mix4m's, which farther back at the 2nd retrace stalled
+108 cm short). The first retrace keeps the full
 stride: where one retrace sufficed the plans stay as they were (barrier9cm's soft plan,
 which walks in MuJoCo; its plan retraced at 0.6 fell there).
 """
@@ -49,7 +51,9 @@ from planner.local.gait_queue import GaitQueue
 RETRACE_FAILS = 4  # failed step attempts in a row that trigger a retrace
 RETRACE_STEPS = 4  # steps traced back before the best point (one crawl cycle)
 LOOKAHEAD_STEPS = 8  # steps past the dead end planned with the look-ahead
-RETRACE_STRIDES = (1.0, 0.6, 0.3)  # stride fraction of the 1st, 2nd, 3rd retrace at one point
+# the retraces at one point: (crawl cycles farther back than the first, stride fraction)
+RETRACES = ((0, 1.0), (0, 0.6), (0, 0.3), (1, 0.6), (2, 0.3))
+RETRACE_STRIDES = tuple(frac for _, frac in RETRACES)  # stride fraction of each retrace
 
 
 class SoftPlanner(LocalPlanner):
@@ -70,8 +74,8 @@ class SoftPlanner(LocalPlanner):
         # before each committed step: (walk mark, queue, run cycle)
         history: list[tuple[tuple, tuple, int]] = []
         retrace_dist = float("inf")  # the best distance to the goal at the last retrace
-        level = 0  # retraces at that point: the steps retraced take RETRACE_STRIDES[level - 1]
-        retrace_k = 0  # ... all from this step of history
+        level = 0  # retraces at that point: the steps retraced take RETRACES[level - 1]
+        retrace_k = 0  # ... the first from this step of history
         lookahead_until = -1  # walk steps up to which footholds are looked ahead
         nearest_walk = NearestWalk()
         while not (message := self.stop_reason(walk, run, fails_in_row)):
@@ -89,10 +93,10 @@ class SoftPlanner(LocalPlanner):
                     lookahead_until = walk.steps + LOOKAHEAD_STEPS
                     at_best = max(k for k, h in enumerate(history) if h[2] <= run.best_at or k == 0)
                     retrace_k = max(at_best - RETRACE_STEPS, 0)
-                else:  # the same dead end again: a crawl cycle farther back, shorter strides
+                else:  # the same dead end again: shorter strides, then farther back
                     level += 1
-                    retrace_k = max(retrace_k - RETRACE_STEPS, 0)
-                k = min(retrace_k, len(history) - 1)
+                back = RETRACES[level - 1][0] * RETRACE_STEPS
+                k = min(max(retrace_k - back, 0), len(history) - 1)
                 mark, legs, _ = history[k]
                 del history[k:]
                 nearest_walk.offer(walk, self.distance_to_goal(walk.state, run))
