@@ -275,7 +275,7 @@ def _dead_end_rule(planner, fr_full=False):
 
 def test_soft_planner_retraces_a_dead_end_with_shorter_strides(littledog, monkeypatch):
     """Soft (8.2) traced back from the same dead end again plans the steps with 8.5's
-    shorter strides (soft.RETRACE_STRIDES): a full HL stride that leaves FL no step is
+    shorter strides (soft.RETRACES): a full HL stride that leaves FL no step is
     replaced by 0.6 of it. Planned again at full stride only (the rule before) it meets the
     same dead end."""
     import planner.local.soft as soft_module
@@ -291,7 +291,7 @@ def test_soft_planner_retraces_a_dead_end_with_shorter_strides(littledog, monkey
     assert any(abs(s - 0.6 * full) < 1e-9 for s in strides[2])  # HL, traced back
     assert _max_sliding(littledog, terrain, plan.samples) < 1e-6
 
-    monkeypatch.setattr(soft_module, "RETRACE_STRIDES", (1.0, 1.0, 1.0))
+    monkeypatch.setattr(soft_module, "RETRACES", ((0, 1.0), (0, 1.0), (0, 1.0)))
     alike = SoftPlanner(littledog, terrain, settings=LocalSettings(max_cycles=40))
     _dead_end_rule(alike)
     assert not alike.plan([0.2, 0.0], [0.45, 0.0]).reached_goal

@@ -53,7 +53,6 @@ RETRACE_STEPS = 4  # steps traced back before the best point (one crawl cycle)
 LOOKAHEAD_STEPS = 8  # steps past the dead end planned with the look-ahead
 # the retraces at one point: (crawl cycles farther back than the first, stride fraction)
 RETRACES = ((0, 1.0), (0, 0.6), (0, 0.3), (1, 0.6), (2, 0.3))
-RETRACE_STRIDES = tuple(frac for _, frac in RETRACES)  # stride fraction of each retrace
 
 
 class SoftPlanner(LocalPlanner):
@@ -84,7 +83,7 @@ class SoftPlanner(LocalPlanner):
             if (
                 (fails_in_row >= RETRACE_FAILS or stalled)
                 and history
-                and (new_point or level < len(RETRACE_STRIDES))
+                and (new_point or level < len(RETRACES))
             ):
                 # a dead end: back to RETRACE_STEPS steps before the best point, and plan
                 # from there with the look-ahead and shorter strides (8.5's tracing back)
@@ -107,7 +106,7 @@ class SoftPlanner(LocalPlanner):
                 run.best_at = run.cycles
                 self.extra_stats["retraces"] += 1
             self.foothold_lookahead = walk.steps < lookahead_until
-            ambition = RETRACE_STRIDES[level - 1] if self.foothold_lookahead else 1.0
+            ambition = RETRACES[level - 1][1] if self.foothold_lookahead else 1.0
             run.cycles += 1
             mark = walk.mark()
             before = tuple(queue)
