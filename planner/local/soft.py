@@ -30,9 +30,9 @@ climbed, and from the same step at 0.6 and 0.3 of the stride the walk met the sa
 (135 cm short); the 4th and 5th retraces start one and two crawl cycles farther back (it
 climbs at the 5th: 66 steps). They come after the first three, so a walk that got out
 with those is planned as before (mix4m's, which farther back at the 2nd retrace stalled
-108 cm short). The first retrace keeps the full
-stride: where one retrace sufficed the plans stay as they were (barrier9cm's soft plan,
-which walks in MuJoCo; its plan retraced at 0.6 fell there).
+108 cm short). The first retrace keeps the full stride: where one retrace sufficed the
+plans stay as they were (barrier9cm's soft plan, which walks in MuJoCo; its plan retraced
+at 0.6 fell there).
 """
 
 from __future__ import annotations
