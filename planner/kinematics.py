@@ -74,13 +74,15 @@ def foot_and_jacobian_np(leg: Leg, theta: np.ndarray) -> tuple[np.ndarray, np.nd
     th = [float(v) for v in theta]
     axes = [leg.axes_B[j].tolist() for j in range(3)]
     points = [leg.points_B[j].tolist() for j in range(3)]
+    cos = [math.cos(t) for t in th]
+    sin = [math.sin(t) for t in th]
 
     def moved(p, upto):  # exp(xi_1 th_1) ... exp(xi_upto th_upto) p
         x, y, z = p
         for j in reversed(range(upto)):
             (kx, ky, kz), (rx, ry, rz) = axes[j], points[j]
             vx, vy, vz = x - rx, y - ry, z - rz
-            c, s = math.cos(th[j]), math.sin(th[j])
+            c, s = cos[j], sin[j]
             d = (kx * vx + ky * vy + kz * vz) * (1.0 - c)
             x = vx * c + (ky * vz - kz * vy) * s + kx * d + rx
             y = vy * c + (kz * vx - kx * vz) * s + ky * d + ry

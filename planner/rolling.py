@@ -54,10 +54,7 @@ _Array = NDArray[np.float64]
 FIXED_POINT_ITERATIONS = 8  # error x (rho / leg length)^k per iteration (0.06^k, LittleDog)
 CONVERGED_M = 1e-7  # centre change [m] that ends the iteration (check's slip limit: 1e-6)
 REST_ITERATIONS = 4  # Newton steps putting a rolled centre back on the offset surface
-
-
-def _rot(axis: _Array, angle: float) -> _Array:
-    return np.asarray(pin.exp3(np.asarray(axis, float) * float(angle)))
+REST_TOL_M = 1e-10  # gap [m] that ends them (check's slip and surface tolerances: 1e-6)
 
 
 def leg_rotations_W(kin: LegKinematics, base_rotation_W: _Array, joints_rad: _Array) -> _Array:
@@ -66,14 +63,24 @@ def leg_rotations_W(kin: LegKinematics, base_rotation_W: _Array, joints_rad: _Ar
     Product of exponentials (eq. 1) of the leg's joint axes (body frame, zero pose) times
     the base rotation; only relative rotations are used, so the constant cancels.
     """
-    out = np.empty((4, 3, 3))
+    k, k2 = _axis_hats(kin)
     jr = np.asarray(joints_rad, float).reshape(4, 3)
-    for i, leg in enumerate(kin.legs):
-        R = np.asarray(base_rotation_W, float)
-        for j in range(3):
-            R = R @ _rot(leg.axes_B[j], jr[i, j])
-        out[i] = R
-    return out
+    s, c = np.sin(jr)[..., None, None], np.cos(jr)[..., None, None]
+    e = np.eye(3) + s * k + (1.0 - c) * k2  # (4, 3, 3, 3): Rodrigues, every joint at once
+    return np.asarray(base_rotation_W, float) @ e[:, 0] @ e[:, 1] @ e[:, 2]
+
+
+def _axis_hats(kin: LegKinematics) -> tuple[_Array, _Array]:
+    """(4, 3, 3, 3) skew matrices of the joint axes and their squares, cached on ``kin``."""
+    cached = getattr(kin, "_rolling_axis_hats", None)
+    if cached is None:
+        a = np.array([leg.axes_B for leg in kin.legs], float)  # (4, 3, 3): leg, joint, xyz
+        k = np.zeros(a.shape[:2] + (3, 3))
+        k[..., 0, 1], k[..., 0, 2], k[..., 1, 2] = -a[..., 2], a[..., 1], -a[..., 0]
+        k[..., 1, 0], k[..., 2, 0], k[..., 2, 1] = a[..., 2], -a[..., 1], a[..., 0]
+        cached = (k, k @ k)
+        kin._rolling_axis_hats = cached
+    return cached
 
 
 def rolling_displacement(R_prev: _Array, R_now: _Array, normal_W: _Array, radius_m: float):
@@ -106,15 +113,16 @@ def _rest(terrain: TerrainLike, c: _Array, n_dir: _Array, rho: float) -> tuple[_
     normal, f_T(r) n_z, is the gap closed by each Newton step.
     """
     c = c.copy()
-    r = c - rho * n_dir
+    n = np.asarray(terrain.normal(c - rho * n_dir), float).reshape(-1, 3)
+    r = c - rho * n
     for _ in range(REST_ITERATIONS):
-        n = np.asarray(terrain.normal(r), float).reshape(-1, 3)
-        r = c - rho * n
+        # the normal at r is that of the contact of the centre before this step's move
+        # along n_dir (|move| = |gap| < 0.01 mm): one terrain pass per step
         f, n = _f_T_and_normal(terrain, r)
         gap = f * n[:, 2]  # > 0: above resting
         c = c - (gap / np.maximum(np.sum(n * n_dir, axis=1), 0.5))[:, None] * n_dir
         r = c - rho * n
-        if float(np.max(np.abs(gap))) < 1e-12:
+        if float(np.max(np.abs(gap))) < REST_TOL_M:
             break
     return c, r
 

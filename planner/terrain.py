@@ -410,6 +410,16 @@ class _Kind:
         hy = np.imag(self.expr(u + 0j, y + 1j * _COMPLEX_STEP, NP)) / _COMPLEX_STEP
         return hx + 0.0 * u, hy + 0.0 * u
 
+    def value_and_grad_np(self, u: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, ...]:
+        """(z, dz/dx, dz/dy) in two complex-step passes instead of three.
+
+        The real part of the x pass is the height: z(u + ih) = z(u) - h^2 z''/2 + i h z',
+        and h^2 = 1e-60 vanishes below rounding.
+        """
+        zx = self.expr(u + 1j * _COMPLEX_STEP, y + 0j, NP)
+        hy = np.imag(self.expr(u + 0j, y + 1j * _COMPLEX_STEP, NP)) / _COMPLEX_STEP
+        return np.real(zx) + 0.0 * u, np.imag(zx) / _COMPLEX_STEP + 0.0 * u, hy + 0.0 * u
+
 
 class _Flat(_Kind):
     kind = "flat"
@@ -789,6 +799,10 @@ class _Rough(_Kind):
 
         One complex exponential per term instead of the complex step's two complex cosines.
         """
+        return self.value_and_grad_np(u, y)[1:]
+
+    def value_and_grad_np(self, u: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, ...]:
+        """(z, dz/dx, dz/dy) from one complex exponential per term."""
         u, y = np.broadcast_arrays(np.asarray(u, float), np.asarray(y, float))
         e = np.exp(1j * (u[..., None] * self.kx + y[..., None] * self.ky + self.phase))
         relief = e.real @ self.a
@@ -799,7 +813,7 @@ class _Rough(_Kind):
         t0, t1 = np.tanh((u - (self.x_start + h)) / s), np.tanh((u - (self.x_end - h)) / s)
         window = 0.5 * (t0 - t1)
         d_window = 0.5 * ((1.0 - t0 * t0) - (1.0 - t1 * t1)) / s
-        return d_window * relief + window * d_x, window * d_y
+        return window * relief, d_window * relief + window * d_x, window * d_y
 
     def sharp_offsets(
         self, u: np.ndarray, y: np.ndarray, du: np.ndarray, dy: np.ndarray
@@ -1033,6 +1047,11 @@ class _Heightfield(_Kind):
         """CasADi's exact derivatives of the B-spline."""
         _, zx, zy = self._call(u, y)
         return zx, zy
+
+    def value_and_grad_np(self, u: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, ...]:
+        """Height and derivatives of the B-spline in one CasADi call."""
+        z, zx, zy = self._call(u, y)
+        return z, zx, zy
 
 
 KINDS: dict[str, type[_Kind]] = {
@@ -1309,9 +1328,8 @@ class Terrain:
         def fn(xf: np.ndarray, yf: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             z, gx, gy = np.zeros(xf.shape), np.zeros(xf.shape), np.zeros(xf.shape)
             for off, k in self._segments:
-                z = z + k.value_np(xf - off, yf)
-                a, b = k.grad_np(xf - off, yf)
-                gx, gy = gx + a, gy + b
+                h, a, b = k.value_and_grad_np(xf - off, yf)
+                z, gx, gy = z + h, gx + a, gy + b
             return z, gx, gy
 
         z, gx, gy = self._apply(fn, p[..., 0], p[..., 1], 3)

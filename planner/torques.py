@@ -55,6 +55,7 @@ _SOLVED = ("Solved", "AlmostSolved")
 # achievable ratio relies on internal foot forces no servo produces (barrier75mm: 49 %
 # achievable, 102 % commanded, and the HL knee saturated and the body yawed 6 degrees)
 COMMANDED_TORQUE_FRACTION = 0.8
+CONE_SLACK = 1e-6  # least-squares forces this far (x the weight) inside every cone skip the SOCP
 _E_Z = np.array([0.0, 0.0, 1.0])
 
 
@@ -162,6 +163,37 @@ class TorqueCheck:
         scale = np.where(np.isfinite(self.effort), 1.0 / self.effort, 0.0)
         return scale[:, None] * tau
 
+    def _least_squares_inside_cones(self, jt: _Array, g: _Array, n: _Array, mu: float):
+        """The effort-weighted least-squares balancing forces (3k,), or None.
+
+        Without the friction cones the problem of :meth:`solve` (``least_squares``) is an
+        equality-constrained least-squares problem, solved by its KKT system; where that
+        solution lies inside every cone (by ``CONE_SLACK`` x the weight) the cones are not
+        active and it is also the optimum with them, so the SOCP is not needed. None (solve
+        the SOCP) where a cone is active or the system is singular.
+        """
+        a = self.weights[:, None] * jt[self.v_idx]  # W J^T (12, 3k)
+        b = jt[self.base_idx]  # balance rows (6, 3k)
+        nf = a.shape[1]
+        kkt = np.zeros((nf + len(b), nf + len(b)))
+        kkt[:nf, :nf] = 2.0 * a.T @ a
+        kkt[:nf, nf:] = b.T
+        kkt[nf:, :nf] = b
+        rhs = np.concatenate([2.0 * a.T @ (self.weights * g[self.v_idx]), g[self.base_idx]])
+        try:
+            f = np.linalg.solve(kkt, rhs)[:nf]
+        except np.linalg.LinAlgError:
+            return None
+        weight = float(np.linalg.norm(g[self.base_idx][:3]))
+        if not np.all(np.isfinite(f)) or np.linalg.norm(b @ f - g[self.base_idx]) > 1e-9 * weight:
+            return None
+        fk = f.reshape(-1, 3)
+        normal = np.einsum("ij,ij->i", fk, n)
+        tangential = np.linalg.norm(fk - normal[:, None] * n, axis=1)
+        if np.any(mu * normal - tangential < CONE_SLACK * weight):
+            return None
+        return f
+
     def solve(
         self, q: _Array, support, mu: float, normals_W: _Array, least_squares: bool = False
     ) -> TorqueFeasibility:
@@ -184,6 +216,15 @@ class TorqueCheck:
         g = pin.computeGeneralizedGravity(model, data, q)
         jt = self._contact_jacobian_T(q, sup, normals_W)  # (nv, 3k)
         base = self.base_idx
+        if least_squares:
+            f = self._least_squares_inside_cones(jt, g, n, mu)
+            if f is not None:
+                forces = np.zeros((4, 3))
+                forces[sup] = f.reshape(k, 3)
+                tau = g[self.v_idx] - jt[self.v_idx] @ f
+                ratios = np.abs(tau) / self.effort
+                worst = int(np.argmax(ratios))
+                return TorqueFeasibility(float(ratios[worst]), tau, forces, worst, "Solved")
         limited = [c for c in range(12) if math.isfinite(self.effort[c])]
         nv = 3 * k + 1  # forces, then s
         rows, b, cones = [], [], []

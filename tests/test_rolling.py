@@ -38,6 +38,27 @@ def _pinocchio_feet(dog, states):
     return np.array(c), np.array(R)
 
 
+def test_leg_rotations_turn_as_pinocchio_s_feet(littledog):
+    """leg_rotations_W (Rodrigues per joint) turns each shank as Pinocchio's foot frame."""
+    from planner.kinematics import kinematics_of
+    from planner.rolling import leg_rotations_W
+
+    kin = kinematics_of(littledog)
+    model, data = littledog.model, littledog.model.createData()
+    ids = [model.getFrameId(f) for f in littledog.foot_frames]
+    rng = np.random.default_rng(3)
+    rots, pins = [], []
+    for _ in range(2):
+        R = pin.exp3(rng.normal(size=3))
+        joints = rng.uniform(-1.0, 1.0, (4, 3))
+        rots.append(leg_rotations_W(kin, R, joints))
+        q = littledog.q_from(np.zeros(3), pin.Quaternion(R).coeffs(), joints)
+        pin.framesForwardKinematics(model, data, q)
+        pins.append(np.array([data.oMf[i].rotation.copy() for i in ids]))
+    for i in range(4):  # relative rotations: the shank's constant zero-pose frame cancels
+        np.testing.assert_allclose(rots[1][i] @ rots[0][i].T, pins[1][i] @ pins[0][i].T, atol=1e-12)
+
+
 @pytest.mark.parametrize("terrain_name", ["flat", "slope10", "rough2cm"])
 def test_stance_feet_roll_without_sliding(littledog, terrain_name):
     terrain, a, b, path = _body_move(littledog, terrain_name, x=1.2)

@@ -130,6 +130,42 @@ def test_least_squares_torques_are_the_equality_constrained_optimum(flat_plan, l
         assert res.ratio >= tc.solve(q, sup, 5.0, up).ratio - 1e-7
 
 
+@pytest.mark.parametrize("course", ["flat", "rough2cm"])
+def test_least_squares_without_active_cones_is_the_socp(flat_plan, littledog, course):
+    """The closed form solve() takes where no cone is active gives the SOCP's optimum.
+
+    Every third sample of a plan, with mu = 0.7: the same forces and torque ratio as
+    Clarabel's SOCP (to its tolerance), taken for most stances; where a cone is active
+    the SOCP is solved.
+    """
+    from planner.terrain import load_terrain
+
+    terrain = load_terrain(course)
+    tc = TorqueCheck(littledog)
+    model, data = littledog.model, littledog.model.createData()
+    closed = total = 0
+    for q, contact in zip(flat_plan.samples.q[::3], flat_plan.samples.contact[::3], strict=True):
+        q = q.copy()
+        q[2] += float(terrain.height(q[0], q[1]))  # the same stance, on this terrain
+        pin.framesForwardKinematics(model, data, q)
+        centres = np.array([data.oMf[f].translation for f in tc.foot_ids])
+        normals = terrain.normal(centres)
+        sup = np.flatnonzero(contact)
+        fast = tc.solve(q, sup, 0.7, normals, least_squares=True)
+        jt = tc._contact_jacobian_T(q, list(sup), normals)
+        g = pin.computeGeneralizedGravity(model, data, q)
+        took = tc._least_squares_inside_cones(jt, g, normals[sup], 0.7) is not None
+        closed, total = closed + took, total + 1
+        tc._least_squares_inside_cones = lambda *args: None  # force the SOCP
+        socp = tc.solve(q, sup, 0.7, normals, least_squares=True)
+        del tc._least_squares_inside_cones
+        assert fast.status == socp.status == "Solved"
+        assert fast.ratio == pytest.approx(socp.ratio, abs=1e-6)
+        np.testing.assert_allclose(fast.forces_W, socp.forces_W, atol=1e-4)
+        np.testing.assert_allclose(fast.torques_nm, socp.torques_nm, atol=1e-6)
+    assert closed >= 0.5 * total
+
+
 def test_commanded_ratio_map_carries_a_body_acceleration(flat_plan, littledog):
     """commanded_ratio_map (closed form, linear in gravity) against the SOCP and RNEA.
 

@@ -1017,16 +1017,17 @@ class LocalPlanner:
                     f"{k} of the path (< {PATH_BALANCE_MARGIN_M * 1000:.0f} mm: a tip-over "
                     "risk)"
                 )
+        # every sample's feet in one terrain pass, for the balance and the torques
+        normals = np.asarray(self.terrain.normal(np.array([s.feet_W for s in path])), float)
         for k, s in enumerate(path[1:-1], start=1):
             sup = np.flatnonzero(s.in_contact)
-            normals = self.terrain.normal(s.feet_W)
             res = static_feasibility(
                 s.feet_W,
                 coms[k],
                 self.robot.total_mass_kg,
                 sup,
                 self.mu,
-                normals,
+                normals[k],
                 with_com_margin=False,
             )
             s.info["margin_N"] = float(res.margin_N)  # the time law's floor (body_offsets_s)
@@ -1038,9 +1039,7 @@ class LocalPlanner:
         ceiling = TORQUE_FRACTION
         for k, (s, q) in enumerate(zip(path, qs, strict=True)):
             sup = _holding_legs(path, k)
-            tq = self.torques.solve(
-                q, sup, self.mu, self.terrain.normal(s.feet_W), least_squares=True
-            )
+            tq = self.torques.solve(q, sup, self.mu, normals[k], least_squares=True)
             if k == 0 and np.isfinite(tq.ratio):  # a measured start: no more than it needs
                 ceiling = max(TORQUE_FRACTION, min(tq.ratio, MAX_START_TORQUE_FRACTION))
             if not tq.ratio <= ceiling:
