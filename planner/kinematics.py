@@ -71,9 +71,25 @@ def foot_and_jacobian_np(leg: Leg, theta: np.ndarray) -> tuple[np.ndarray, np.nd
     after it in the product (exp(xi_1 th_1) ... exp(xi_{j-1} th_{j-1}) applied to them:
     the spatial twist of a revolute joint). Python floats, as in :func:`twist_apply_np`.
     """
-    th = [float(v) for v in theta]
-    axes = [leg.axes_B[j].tolist() for j in range(3)]
-    points = [leg.points_B[j].tolist() for j in range(3)]
+    p, cols = _foot_and_columns(_leg_floats(leg), [float(v) for v in theta])
+    return np.array(p), np.array(cols).T
+
+
+def _leg_floats(leg: Leg) -> tuple:
+    """(axes, points, foot) of a leg as tuples of Python floats, for the scalar FK."""
+    axes = tuple(tuple(leg.axes_B[j].tolist()) for j in range(3))
+    points = tuple(tuple(leg.points_B[j].tolist()) for j in range(3))
+    return axes, points, tuple(leg.foot_B0.tolist())
+
+
+def _foot_and_columns(consts: tuple, th: list) -> tuple[tuple, list]:
+    """Foot centre and Jacobian columns of :func:`foot_and_jacobian_np`, as Python floats.
+
+    ``consts`` from :func:`_leg_floats` (cached per leg by :class:`LegKinematics`): the
+    rolling stance feet call this ~60 000 times a walk, where the per-call conversions of
+    the leg's arrays cost as much as the arithmetic.
+    """
+    axes, points, foot = consts
     cos = [math.cos(t) for t in th]
     sin = [math.sin(t) for t in th]
 
@@ -89,7 +105,7 @@ def foot_and_jacobian_np(leg: Leg, theta: np.ndarray) -> tuple[np.ndarray, np.nd
             z = vz * c + (kx * vy - ky * vx) * s + kz * d + rz
         return x, y, z
 
-    px, py, pz = moved(leg.foot_B0.tolist(), 3)
+    px, py, pz = moved(foot, 3)
     cols = []
     for j in range(3):
         rx, ry, rz = moved(points[j], j)
@@ -97,7 +113,7 @@ def foot_and_jacobian_np(leg: Leg, theta: np.ndarray) -> tuple[np.ndarray, np.nd
         wx, wy, wz = tip[0] - rx, tip[1] - ry, tip[2] - rz
         dx, dy, dz = px - rx, py - ry, pz - rz
         cols.append((wy * dz - wz * dy, wz * dx - wx * dz, wx * dy - wy * dx))
-    return np.array([px, py, pz]), np.array(cols).T
+    return (px, py, pz), cols
 
 
 def _solve3(cols, b):
@@ -181,6 +197,9 @@ class LegKinematics:
             p = twist_apply_ca(leg, th, leg.foot_B0)
             self._foot_fun.append(ca.Function(f"foot_{leg.name}", [th], [p, ca.jacobian(p, th)]))
         self._centres = [hip_centre_B(leg) for leg in self.legs]
+        self._newton_consts = [  # per leg, Python floats for ik_leg_near's Newton steps
+            (_leg_floats(leg), leg.lower_rad.tolist(), leg.upper_rad.tolist()) for leg in self.legs
+        ]
         # link masses and COMs at zero configuration (body frame), grouped by leg joint
         model = robot.model
         import pinocchio as pin
@@ -368,26 +387,32 @@ class LegKinematics:
         when Newton leaves the joint limits, moves more than ``max_step_rad`` or does not
         converge in 6 steps.
         """
-        lg = self.legs[leg]
-        target = np.asarray(target_B, dtype=float)
-        th0 = np.asarray(joints_rad, dtype=float)
-        th = th0.tolist()
-        tx, ty, tz = target.tolist()
+        consts, lower, upper = self._newton_consts[leg]
+        th0 = [float(v) for v in joints_rad]
+        th = th0
+        tx, ty, tz = (float(v) for v in target_B)
         err_m = math.inf
         for _ in range(7):
-            p, jac = foot_and_jacobian_np(lg, th)
+            p, cols = _foot_and_columns(consts, th)
             ex, ey, ez = tx - p[0], ty - p[1], tz - p[2]
             err_m = math.sqrt(ex * ex + ey * ey + ez * ez)
             if err_m <= tol_m:
                 break
-            step = _solve3(jac.T.tolist(), (ex, ey, ez))
+            step = _solve3(cols, (ex, ey, ez))
             if step is None:
                 break
             th = [a + b for a, b in zip(th, step, strict=True)]
-        th = np.array(th)
-        in_limits = bool(np.all(th >= lg.lower_rad - 1e-12) and np.all(th <= lg.upper_rad + 1e-12))
-        if err_m <= tol_m and in_limits and float(np.max(np.abs(th - th0))) <= max_step_rad:
-            return IKResult(joints_rad=th, reachable=True, error_m=err_m, method="newton")
+        in_limits = all(
+            lo - 1e-12 <= t <= hi + 1e-12 for t, lo, hi in zip(th, lower, upper, strict=True)
+        )
+        if (
+            err_m <= tol_m
+            and in_limits
+            and max(abs(a - b) for a, b in zip(th, th0, strict=True)) <= max_step_rad
+        ):
+            return IKResult(joints_rad=np.array(th), reachable=True, error_m=err_m, method="newton")
+        th0 = np.array(th0)
+        target = np.asarray(target_B, dtype=float)
         return self.ik_leg(leg, target, th0, knee=self.knee_direction(leg, th0))
 
     def _reference(self, leg: int, reference_rad) -> np.ndarray:

@@ -105,26 +105,28 @@ def sliding(c_prev, c_now, R_prev, R_now, normal_W, radius_m: float) -> _Array:
     return np.linalg.norm(res, axis=1)
 
 
-def _rest(terrain: TerrainLike, c: _Array, n_dir: _Array, rho: float) -> tuple[_Array, _Array]:
-    """Move centres along ``n_dir`` until their spheres rest on the terrain; (centres, contacts).
+def _rest(
+    terrain: TerrainLike, c: _Array, n_dir: _Array, rho: float, n_start: _Array
+) -> tuple[_Array, _Array, _Array]:
+    """Move centres along ``n_dir`` until their spheres rest on the terrain.
 
-    The contact point r = c - rho n(r) (fixed point from the normal at ``c - rho n_dir``)
-    lies on the surface when the sphere rests; its height over the surface along the
-    normal, f_T(r) n_z, is the gap closed by each Newton step.
+    The contact point r = c - rho n(r) lies on the surface when the sphere rests; its
+    height over the surface along the normal, f_T(r) n_z, is the gap closed by each
+    Newton step. r starts from ``n_start`` (the normal of a contact nearby: the last
+    one found) and takes the normal at the last r at each step, one terrain pass a step.
+    Returns (centres, contacts, normals at the contacts).
     """
     c = c.copy()
-    n = np.asarray(terrain.normal(c - rho * n_dir), float).reshape(-1, 3)
+    n = np.asarray(n_start, float).reshape(-1, 3)
     r = c - rho * n
     for _ in range(REST_ITERATIONS):
-        # the normal at r is that of the contact of the centre before this step's move
-        # along n_dir (|move| = |gap| < 0.01 mm): one terrain pass per step
         f, n = _f_T_and_normal(terrain, r)
         gap = f * n[:, 2]  # > 0: above resting
         c = c - (gap / np.maximum(np.sum(n * n_dir, axis=1), 0.5))[:, None] * n_dir
         r = c - rho * n
         if float(np.max(np.abs(gap))) < REST_TOL_M:
             break
-    return c, r
+    return c, r, n
 
 
 def _f_T_and_normal(terrain: TerrainLike, r: _Array) -> tuple[_Array, _Array]:
@@ -165,7 +167,7 @@ def roll_stance_feet(
     ref = np.asarray(reference_rad, float).reshape(4, 3)
     c_B = (c - p_W) @ R_W
     results = [kin.ik_leg_near(i, c_B[i], ref[i]) for i in range(4)]  # swing legs once
-    contacts = None
+    contacts, n_contact = None, n_prev
     for _ in range(FIXED_POINT_ITERATIONS):
         joints = np.array([r.joints_rad for r in results])
         R_now = leg_rotations_W(kin, R_W, joints)
@@ -173,7 +175,7 @@ def roll_stance_feet(
         # the tangential rolling leaves a sphere O(curvature x step^2) off a curved
         # terrain: put it back along n (no tangential part, so no sliding), inside the
         # fixed point so that the legs' rotations, hence the rolling, follow
-        moved, contacts = _rest(terrain, moved, n_prev, rho)
+        moved, contacts, n_contact = _rest(terrain, moved, n_prev, rho, n_contact)
         change = float(np.max(np.abs(moved - c[s])))
         c[s] = moved
         for i in s:  # stance legs onto their rolled centres (Newton from the last angles)

@@ -35,6 +35,7 @@ conditioned.
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections.abc import Sequence
@@ -276,6 +277,15 @@ def _tangent_bases(n: _Array) -> tuple[_Array, _Array]:
     t1 = _cross(n, a)
     t1 /= np.sqrt(np.einsum("ij,ij->i", t1, t1))[:, None]
     return t1, _cross(n, t1)
+
+
+@functools.lru_cache(maxsize=16)
+def _zero_csc(n: int) -> sp.csc_matrix:
+    """The (n, n) zero matrix in CSC, built once per size: a linear cost's P.
+
+    It has no entries, so no solve can change it: one instance serves them all.
+    """
+    return sp.csc_matrix((n, n))
 
 
 def _csc(a: _Array) -> sp.csc_matrix:
@@ -727,7 +737,7 @@ def _margin_socp(sc: _Scaled, com_W: _Array, mu: float) -> tuple[float, _Array, 
         settings = _settings()
         for key, value in retry.items():
             setattr(settings, key, value)
-        solver = clarabel.DefaultSolver(_csc(np.zeros((nv, nv))), q, _csc(a), b, cones, settings)
+        solver = clarabel.DefaultSolver(_zero_csc(nv), q, _csc(a), b, cones, settings)
         res = solver.solve()
         status = str(res.status)
         x = np.asarray(res.x)
@@ -833,9 +843,7 @@ def _com_region(sc: _Scaled, com_z_m: float, mu: float, n_dirs: int, clip: float
         q = np.zeros(nv)
         q[3 * k :] = -np.array([math.cos(ang), math.sin(ang)])
         if solver is None:
-            solver = clarabel.DefaultSolver(
-                _csc(np.zeros((nv, nv))), q, _csc(a), b, cones, _settings()
-            )
+            solver = clarabel.DefaultSolver(_zero_csc(nv), q, _csc(a), b, cones, _settings())
         else:
             solver.update(q=q)
         res = solver.solve()

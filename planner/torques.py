@@ -33,7 +33,7 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
-from planner.statics import _csc, _tangent_bases
+from planner.statics import _csc, _tangent_bases, _zero_csc
 
 if TYPE_CHECKING:
     from planner.robot import Robot
@@ -257,7 +257,7 @@ class TorqueCheck:
         b.append(np.zeros(3 * k))
         cones += [clarabel.SecondOrderConeT(3) for _ in range(k)]
         cost = np.zeros(nv)
-        hess = _csc(np.zeros((nv, nv)))
+        hess = _zero_csc(nv)
         if least_squares:  # |W (g_a - A f)|^2 = f'A'W'W A f - 2 g_a'W'W A f + const
             a = self.weights[:, None] * jt[self.v_idx]
             h = np.zeros((nv, nv))
