@@ -306,5 +306,8 @@ def test_a_knee_flipping_between_two_clear_samples_through_a_wall_fails(flat_pla
         R = pin.Quaternion(qq[6], qq[3], qq[4], qq[5]).toRotationMatrix()
         feet = np.zeros((4, 3))
         states.append(State(qq[:3].copy(), R, feet, qq[7:].reshape(4, 3).copy(), 1, (1, 2, 3)))
-    why = planner._between_samples(states, [q, plan.samples.q[k + 1]], leg_links(littledog))
+    links = leg_links(littledog)
+    ends = [q, plan.samples.q[k + 1]]
+    bares = links.path_margins(terrain, ends, [[0], [0]], scales=(0.0,))[0]
+    why = planner._between_samples(states, ends, links, bares)
     assert "FL" in why and "between samples 0 and 1" in why, why

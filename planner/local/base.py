@@ -1002,7 +1002,7 @@ class LocalPlanner:
                 c = int(np.argmin(bare - bare_floor))
                 if bare[c] < bare_floor[c]:
                     return f"the {links.describe(c)} touches the terrain at sample {k} of the path"
-        why = self._between_samples(path, qs, links)
+        why = self._between_samples(path, qs, links, bares)
         if why:
             return why
         coms = [self.check.com_W(s) for s in path]  # Pinocchio, once per sample
@@ -1067,7 +1067,7 @@ class LocalPlanner:
                     )
         return ""
 
-    def _between_samples(self, path: list[State], qs: list, links) -> str:
+    def _between_samples(self, path: list[State], qs: list, links, bares: list) -> str:
         """Why the motion between two samples passes a leg link through the terrain, or "".
 
         The executor interpolates the joints linearly between samples; where a joint moves
@@ -1076,7 +1076,11 @@ class LocalPlanner:
         may come no nearer the terrain than at the interval's two ends or 0. gen:5's plan
         flipped a front knee 144 degrees between two clear samples; the shank passed 16 mm
         through a stone between them, and the robot tipped over in MuJoCo.
+        ``bares`` (N, C): the links' clearance bounds at the samples (path_problem's); the
+        configurations between samples are measured in one terrain query per set of legs
+        swept.
         """
+        sweeps = []  # (k, legs swept, swing legs, configurations between k and k + 1)
         for k in range(len(path) - 1):
             a, b = path[k], path[k + 1]
             leg_jump = np.max(np.abs(b.joints_rad - a.joints_rad), axis=1)  # (4,) [rad]
@@ -1086,16 +1090,23 @@ class LocalPlanner:
             swing = [i for i in range(4) if not (a.in_contact[i] and b.in_contact[i])]
             # a leg moving less than one sweep step is within it of its ends (a stance leg
             # beside a swing does not move at all): only the others are swept
-            legs = np.flatnonzero(leg_jump > BETWEEN_STEP_RAD)
+            legs = tuple(int(i) for i in np.flatnonzero(leg_jump > BETWEEN_STEP_RAD))
             m = int(np.ceil(jump / BETWEEN_STEP_RAD))
-            sweep = [qs[k], qs[k + 1]] + [
-                between_q(qs[k], qs[k + 1], u) for u in np.arange(1, m) / m
-            ]
-            bares = links.path_margins(
-                self.terrain, sweep, [swing] * len(sweep), scales=(0.0,), legs=legs
-            )[0]
-            floor = np.minimum(np.minimum(bares[0], bares[1]), 0.0) - START_SLACK_M
-            for bare in bares[2:]:
+            inner = [between_q(qs[k], qs[k + 1], u) for u in np.arange(1, m) / m]
+            sweeps.append((k, legs, swing, inner, jump))
+        measured: dict[int, np.ndarray] = {}
+        for legs in {legs for _, legs, _, _, _ in sweeps}:
+            group = [sw for sw in sweeps if sw[1] == legs]
+            qs_all = [q for sw in group for q in sw[3]]
+            swings = [sw[2] for sw in group for _ in sw[3]]
+            out = links.path_margins(self.terrain, qs_all, swings, scales=(0.0,), legs=legs)[0]
+            at = 0
+            for sw in group:
+                measured[sw[0]] = out[at : at + len(sw[3])]
+                at += len(sw[3])
+        for k, _, _, _, jump in sweeps:
+            floor = np.minimum(np.minimum(bares[k], bares[k + 1]), 0.0) - START_SLACK_M
+            for bare in measured[k]:
                 c = int(np.argmin(bare - floor))
                 if bare[c] < floor[c]:
                     return (
