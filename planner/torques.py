@@ -149,19 +149,36 @@ class TorqueCheck:
         finally:
             model.gravity.linear = saved
         g = np.column_stack(gens)  # (nv, 3): generalized gravity per unit gravity component
-        base = self.base_idx
-        a = self.weights[:, None] * jt[self.v_idx]  # W J^T (12, 3k)
-        b = jt[base]  # balance rows (6, 3k)
+        kkt, a = self._weighted_kkt(jt)
         nf = jt.shape[1]
-        kkt = np.zeros((nf + len(base), nf + len(base)))
-        kkt[:nf, :nf] = 2.0 * a.T @ a
-        kkt[:nf, nf:] = b.T
-        kkt[nf:, :nf] = b
-        rhs = np.vstack([2.0 * a.T @ (self.weights[:, None] * g[self.v_idx]), g[base]])
+        rhs = np.vstack([2.0 * a.T @ (self.weights[:, None] * g[self.v_idx]), g[self.base_idx]])
         f = np.linalg.lstsq(kkt, rhs, rcond=None)[0][:nf]  # (3k, 3)
         tau = g[self.v_idx] - jt[self.v_idx] @ f
         scale = np.where(np.isfinite(self.effort), 1.0 / self.effort, 0.0)
         return scale[:, None] * tau
+
+    def _weighted_kkt(self, jt: _Array) -> tuple[_Array, _Array]:
+        """KKT matrix of min |W (g_a - A f)|^2 s.t. B f = g_b, and W A (= W J^T, (12, 3k)).
+
+        A, B: the joint and the balance (free-flyer) rows of ``jt``; W = 1 / effort.
+        """
+        a = self.weights[:, None] * jt[self.v_idx]  # W J^T (12, 3k)
+        b = jt[self.base_idx]  # balance rows (6, 3k)
+        nf = a.shape[1]
+        kkt = np.zeros((nf + len(b), nf + len(b)))
+        kkt[:nf, :nf] = 2.0 * a.T @ a
+        kkt[:nf, nf:] = b.T
+        kkt[nf:, :nf] = b
+        return kkt, a
+
+    def _feasibility(self, g: _Array, jt: _Array, sup, f: _Array, status: str):
+        """The :class:`TorqueFeasibility` of balancing forces ``f`` (3k,) on ``sup``."""
+        forces = np.zeros((4, 3))
+        forces[sup] = f.reshape(len(sup), 3)
+        tau = g[self.v_idx] - jt[self.v_idx] @ f
+        ratios = np.abs(tau) / self.effort
+        worst = int(np.argmax(ratios))
+        return TorqueFeasibility(float(ratios[worst]), tau, forces, worst, status)
 
     def _least_squares_inside_cones(self, jt: _Array, g: _Array, n: _Array, mu: float):
         """The effort-weighted least-squares balancing forces (3k,), or None.
@@ -172,13 +189,9 @@ class TorqueCheck:
         active and it is also the optimum with them, so the SOCP is not needed. None (solve
         the SOCP) where a cone is active or the system is singular.
         """
-        a = self.weights[:, None] * jt[self.v_idx]  # W J^T (12, 3k)
-        b = jt[self.base_idx]  # balance rows (6, 3k)
+        kkt, a = self._weighted_kkt(jt)
+        b = jt[self.base_idx]
         nf = a.shape[1]
-        kkt = np.zeros((nf + len(b), nf + len(b)))
-        kkt[:nf, :nf] = 2.0 * a.T @ a
-        kkt[:nf, nf:] = b.T
-        kkt[nf:, :nf] = b
         rhs = np.concatenate([2.0 * a.T @ (self.weights * g[self.v_idx]), g[self.base_idx]])
         try:
             f = np.linalg.solve(kkt, rhs)[:nf]
@@ -219,12 +232,7 @@ class TorqueCheck:
         if least_squares:
             f = self._least_squares_inside_cones(jt, g, n, mu)
             if f is not None:
-                forces = np.zeros((4, 3))
-                forces[sup] = f.reshape(k, 3)
-                tau = g[self.v_idx] - jt[self.v_idx] @ f
-                ratios = np.abs(tau) / self.effort
-                worst = int(np.argmax(ratios))
-                return TorqueFeasibility(float(ratios[worst]), tau, forces, worst, "Solved")
+                return self._feasibility(g, jt, sup, f, "Solved")
         limited = [c for c in range(12) if math.isfinite(self.effort[c])]
         nv = 3 * k + 1  # forces, then s
         rows, b, cones = [], [], []
@@ -274,16 +282,10 @@ class TorqueCheck:
         )
         res = solver.solve()
         status = str(res.status)
-        forces = np.zeros((4, 3))
         if status in _SOLVED:
-            x = np.asarray(res.x)
-            forces[sup] = x[: 3 * k].reshape(k, 3)
-            tau = g[self.v_idx] - jt[self.v_idx] @ x[: 3 * k]
-            ratios = np.abs(tau) / self.effort
-            worst = int(np.argmax(ratios))
-            return TorqueFeasibility(float(ratios[worst]), tau, forces, worst, status)
+            return self._feasibility(g, jt, sup, np.asarray(res.x)[: 3 * k], status)
         ratio = math.inf if "Infeasible" in status else math.nan
-        return TorqueFeasibility(ratio, np.full(12, np.nan), forces, -1, status)
+        return TorqueFeasibility(ratio, np.full(12, np.nan), np.zeros((4, 3)), -1, status)
 
 
 def holding_load(
