@@ -41,7 +41,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from planner.errors import InputError
-from planner.plan import Plan, Samples
+from planner.plan import Plan, Samples, states_of_samples
 from planner.simulate import (
     SimResult,
     SimSettings,
@@ -442,7 +442,7 @@ def run_feedback(
             may_correct = guided and guide_cycles is not None
             if may_correct and plan_steps_first:
                 ran = _follow_corrected(
-                    ex, meas, robot, terrain, s_plan, centres, *guide_cycles[g], sim
+                    ex, meas, robot, terrain, s_plan, centres, *guide_cycles[g], sim, local
                 )
             if guided and ran is None:  # the plan's foothold, from a body ever nearer the incentre
                 for _, shrink in BACKOFF:
@@ -460,7 +460,7 @@ def run_feedback(
                     and not step.ok
                 ):
                     ran = _follow_corrected(
-                        ex, meas, robot, terrain, s_plan, centres, *guide_cycles[g], sim
+                        ex, meas, robot, terrain, s_plan, centres, *guide_cycles[g], sim, local
                     )
                     if ran is not None:
                         why = f"{step.diagnosis}; executed the plan's step, corrected (8.4)"
@@ -600,23 +600,17 @@ def correct_cycle(
         quat_from_rotation,
         rotation_from_quat,
         rotation_from_vector,
-        vector_from_rotation,
     )
 
     kin = kinematics_of(robot)
     c_meas = _foot_centres(robot, meas.q)
-    down = plan_contact[0]
-    d = np.mean((c_meas - plan_centres[0])[down], axis=0) if down.any() else np.zeros(3)
     n = len(plan_q)
     out = plan_q.copy()
     # the measured base relative to the plan's first (shifted) one, faded out over the
     # four-feet phase: a world-frame rotation vector and a translation
     up = np.flatnonzero(~np.asarray(plan_contact, bool).all(axis=1))
     k_end = int(up[0]) - 1 if up.size else n - 1
-    rot_err = vector_from_rotation(
-        rotation_from_quat(meas.q[3:7]) @ rotation_from_quat(plan_q[0, 3:7]).T
-    )
-    pos_err = meas.q[:3] - (plan_q[0, :3] + d)
+    d, pos_err, rot_err = _base_error(robot, plan_q[0], plan_contact[0], plan_centres[0], meas)
     clock = np.arange(n, dtype=float) if times is None else np.asarray(times, float)
     span = max(float(clock[max(k_end, 0)] - clock[0]), 1e-9)
     misses = 0
@@ -664,6 +658,52 @@ def correct_cycle(
     return out, misses
 
 
+def _base_error(robot, plan_q0: _Array, plan_contact0: NDArray, plan_centres0: _Array, meas):
+    """(feet's mean offset d (3,), base position error (3,) [m], rotation vector (3,) [rad]).
+
+    The measured base against the plan's first sample shifted by the mean offset ``d`` of
+    the measured stance feet from the plan's (world frame), as :func:`correct_cycle` uses.
+    """
+    from planner.lie import rotation_from_quat, vector_from_rotation
+
+    down = np.asarray(plan_contact0, bool)
+    c_meas = _foot_centres(robot, meas.q)
+    d = np.mean((c_meas - plan_centres0)[down], axis=0) if down.any() else np.zeros(3)
+    rot_err = vector_from_rotation(
+        rotation_from_quat(meas.q[3:7]) @ rotation_from_quat(plan_q0[3:7]).T
+    )
+    return d, meas.q[:3] - (plan_q0[:3] + d), rot_err
+
+
+def _four_feet_span_s(times: _Array, contact: NDArray) -> float:
+    """Duration [s] of the four-feet phase that opens a cycle (until its first lift-off)."""
+    up = np.flatnonzero(~np.asarray(contact, bool).all(axis=1))
+    k_end = int(up[0]) - 1 if up.size else len(times) - 1
+    return float(times[max(k_end, 0)] - times[0])
+
+
+def _correction_time_s(robot, pos_err: _Array, rot_err: _Array, local=None) -> float:
+    """Least time [s] to bring the body from its measured pose to the plan's (8.4).
+
+    The base's error, and its rotation's at the hips (the lever of the farthest hip), moved
+    from rest to rest under the planner's body-move time law (``body_speed_m_s``,
+    ``body_accel_m_s2`` of ``local``'s settings; LittleDog's defaults without it). The plan's
+    four-feet phase is timed for the plan's own move, 0.2 s for millimetres: barrier75mm's
+    body, 2.8 cm off the plan after steps planned anew, was pulled back in those 0.2 s and
+    the robot tipped as the next foot lifted, and fell.
+    """
+    from planner.kinematics import hip_point_B
+    from planner.local.base import BODY_ACCEL_M_S2, BODY_SPEED_M_S
+    from planner.time_law import rest_to_rest_durations_s
+
+    st = getattr(local, "settings", None)
+    speed = getattr(st, "body_speed_m_s", None) or BODY_SPEED_M_S
+    accel = getattr(st, "body_accel_m_s2", None) or BODY_ACCEL_M_S2
+    lever = max(float(np.linalg.norm(hip_point_B(leg))) for leg in robot.legs)
+    err = max(float(np.linalg.norm(pos_err)), lever * float(np.linalg.norm(rot_err)))
+    return float(rest_to_rest_durations_s(np.array([err]), np.array([speed]), accel)[0])
+
+
 def blend_in(robot, q: _Array, contact: NDArray, times: _Array, current_joints: _Array) -> _Array:
     """Set-points ``q`` (n, 19) that start from ``current_joints`` (12,, robot order).
 
@@ -687,7 +727,9 @@ def blend_in(robot, q: _Array, contact: NDArray, times: _Array, current_joints: 
     return out
 
 
-def _follow_corrected(ex, meas, robot, terrain, s: Samples, centres, a: int, b: int, sim):
+def _follow_corrected(
+    ex, meas, robot, terrain, s: Samples, centres, a: int, b: int, sim, local=None
+):
     """Execute plan samples a..b corrected from the measurement ``meas`` (8.4), or None.
 
     One correction, from the measurement the cycle was planned from, for the whole step.
@@ -705,6 +747,16 @@ def _follow_corrected(ex, meas, robot, terrain, s: Samples, centres, a: int, b: 
     hind-leg swing after a 6 cm step down (21-22 mm all along) tipped the body 34 degrees;
     with 25 mm the step is refused, the gait queue steps instead, and the walk reaches
     the goal (the generated physics bench: 24 of 25 feedback runs, from 23).
+
+    With ``local`` (a :class:`~planner.local.base.LocalPlanner`) the corrected samples,
+    before the servo blend, must also pass the check every path planned anew passes
+    (:meth:`~planner.local.base.LocalPlanner.path_problem`: body box, leg links between
+    samples, friction cones, joint torques, the final stance's sway), so that a corrected
+    step is never held to less than a step planned anew (barrier75mm's plan of 1bc79ed,
+    its steps corrected first: one asked FR's knee for more than the 80 % of its effort a
+    path may ask). A body measured off the plan is brought back over a four-feet hold as
+    long as :func:`_correction_time_s` asks, where the cycle's own four-feet phase is
+    shorter.
     """
     from planner.kinematics import kinematics_of
     from planner.lie import rotation_from_quat
@@ -712,11 +764,17 @@ def _follow_corrected(ex, meas, robot, terrain, s: Samples, centres, a: int, b: 
     from planner.stability import BALANCE_MARGIN_M, support_margin_m
 
     times, contact = s.time[a : b + 1], s.contact[a : b + 1]
-    q, misses = correct_cycle(
-        robot, s.q[a : b + 1], contact, centres[a : b + 1], meas, times, sim.targets()
-    )
+    plan_q, plan_centres = s.q[a : b + 1], centres[a : b + 1]
+    _, pos_err, rot_err = _base_error(robot, plan_q[0], contact[0], plan_centres[0], meas)
+    hold = _correction_time_s(robot, pos_err, rot_err, local) - _four_feet_span_s(times, contact)
+    if hold > 0.0:  # the body is brought back to the plan no faster than the time law allows
+        times = np.concatenate([times[:1], times + hold])
+        contact, plan_q = np.concatenate([contact[:1], contact]), np.vstack([plan_q[:1], plan_q])
+        plan_centres = np.concatenate([plan_centres[:1], plan_centres])
+    q_body, misses = correct_cycle(robot, plan_q, contact, plan_centres, meas, times)
     if misses:
         return None
+    q = blend_in(robot, q_body, contact, times, sim.targets())
     kin, links = kinematics_of(robot), leg_links(robot)
     floor = None
     for qk, ck in zip(q, contact, strict=True):
@@ -730,6 +788,11 @@ def _follow_corrected(ex, meas, robot, terrain, s: Samples, centres, a: int, b: 
         feet = kin.feet_W(qk[:3], R, joints)[ck]
         com = qk[:3] + R @ kin.com_B(joints)
         if support_margin_m(feet, com) < BALANCE_MARGIN_M:
+            return None
+    if local is not None:
+        centres_W = np.array([_foot_centres(robot, qk) for qk in q_body])
+        path = states_of_samples(robot, terrain, q_body, contact, times, centres_W)
+        if local.path_problem(path):
             return None
     ex.monitor.keyframe(0)
     return ex.follow(times, q, contact)

@@ -47,6 +47,7 @@ __all__ = [
     "Plan",
     "Samples",
     "TerrainGrid",
+    "states_of_samples",
 ]
 
 PLAN_FORMAT = "stratawalk.plan/1"
@@ -682,34 +683,54 @@ class Plan:
             A sample with fewer than three feet in contact (no stratum describes it).
 
         """
-        from planner.contact import swing_point_from_centre, unique_contact_points
-        from planner.lie import rotation_from_quat
+        return states_of_samples(
+            self.load_robot(),
+            self.load_terrain(),
+            self.samples.q,
+            self.samples.contact,
+            self.samples.time,
+            self.foot_centres_W(),
+            source=self.source,
+        )
 
-        robot, terrain = self.load_robot(), self.load_terrain()
-        rho = robot.foot_radius_m
-        centres = self.foot_centres_W()
-        down = self.samples.contact
-        feet_all = swing_point_from_centre(centres, rho)
-        if down.any():
-            feet_all[down] = unique_contact_points(terrain, centres[down], rho)[0]
-        out = []
-        for k, (q, c) in enumerate(zip(self.samples.q, self.samples.contact, strict=True)):
-            up = np.flatnonzero(~c)
-            if len(up) > 1:
-                raise ValueError(
-                    f"{self.source}: samples.contact[{k}]: {int(c.sum())} feet down, a State "
-                    "needs at least three"
-                )
-            feet = feet_all[k]
-            out.append(
-                State(
-                    base_position_W=q[:3].copy(),
-                    base_rotation_W=rotation_from_quat(q[3:7]),
-                    feet_W=feet,
-                    joints_rad=robot.joints_from_q(q),
-                    stratum=int(up[0]) + 1 if len(up) else 0,
-                    support=tuple(int(i) for i in np.flatnonzero(c)),
-                    info={"sample": k, "time": float(self.samples.time[k])},
-                )
+
+def states_of_samples(
+    robot, terrain, q: _Array, contact: NDArray, time_s: _Array, centres_W: _Array, source=""
+) -> list[State]:
+    """Samples ``q`` (n, 19) with ``contact`` (n, 4) as :class:`~planner.state.State`.
+
+    ``centres_W`` (n, 4, 3): the feet's sphere centres (forward kinematics of ``q``). A
+    foot in contact gets the contact point ``c - rho n`` (whichever contact convention
+    fits c better, :func:`planner.contact.contact_points_from_centres`), a swing foot
+    ``c - rho e_z``; the stratum comes from the contact flags, ``support`` is the feet
+    in contact, ``info`` holds ``sample`` and ``time``. A ValueError naming ``source``
+    for a sample with fewer than three feet down.
+    """
+    from planner.contact import swing_point_from_centre, unique_contact_points
+    from planner.lie import rotation_from_quat
+
+    rho = robot.foot_radius_m
+    down = np.asarray(contact, bool)
+    feet_all = swing_point_from_centre(np.asarray(centres_W, float), rho)
+    if down.any():
+        feet_all[down] = unique_contact_points(terrain, np.asarray(centres_W)[down], rho)[0]
+    out = []
+    for k, (qk, c) in enumerate(zip(q, down, strict=True)):
+        up = np.flatnonzero(~c)
+        if len(up) > 1:
+            raise ValueError(
+                f"{source}: samples.contact[{k}]: {int(c.sum())} feet down, a State "
+                "needs at least three"
             )
-        return out
+        out.append(
+            State(
+                base_position_W=qk[:3].copy(),
+                base_rotation_W=rotation_from_quat(qk[3:7]),
+                feet_W=feet_all[k],
+                joints_rad=robot.joints_from_q(qk),
+                stratum=int(up[0]) + 1 if len(up) else 0,
+                support=tuple(int(i) for i in np.flatnonzero(c)),
+                info={"sample": k, "time": float(time_s[k])},
+            )
+        )
+    return out

@@ -338,17 +338,32 @@ def test_feedback_executes_the_plans_own_steps_corrected_first(short_plan, monke
     assert fb["plan_steps_corrected"] == 0 and fb["plan_steps_followed"] == 2, fb
 
 
-@pytest.mark.parametrize("gate", ["balance", "links"])
+@pytest.mark.parametrize("gate", ["balance", "links", "path"])
 def test_a_corrected_plan_step_that_fails_a_gate_is_not_executed(short_plan, monkeypatch, gate):
-    """The fallback refuses a corrected step whose COM nears a support edge or whose leg links
-    dip into the terrain: nothing is executed and the caller goes on replanning."""
+    """The fallback refuses a corrected step whose COM nears a support edge, whose leg links
+    dip into the terrain, or that fails the check of a path planned anew: nothing is executed
+    and the caller goes on replanning."""
     import planner.links
     import planner.stability
     from planner.execution import _follow_corrected
+    from planner.local.base import LocalPlanner
+    from planner.local.soft import SoftPlanner
     from planner.simulate import new_run
 
+    robot, terrain = short_plan.load_robot(), short_plan.load_terrain()
+    local = SoftPlanner(robot, terrain, mu=short_plan.friction)
+    checked = []
+    real_problem = LocalPlanner.path_problem
+
+    def counted(self, path):
+        checked.append(len(path))
+        return real_problem(self, path)
+
+    monkeypatch.setattr(LocalPlanner, "path_problem", counted)
     if gate == "balance":  # no support triangle holds the COM 1 m inside it
         monkeypatch.setattr(planner.stability, "BALANCE_MARGIN_M", 1.0)
+    elif gate == "path":  # e.g. a joint past its torque margin on the corrected samples
+        monkeypatch.setattr(LocalPlanner, "path_problem", lambda self, path: "torque")
     else:  # after the first sample every link 1 m inside the terrain
         real = planner.links.LegLinks.path_margin
         calls = []
@@ -359,19 +374,65 @@ def test_a_corrected_plan_step_that_fails_a_gate_is_not_executed(short_plan, mon
 
         monkeypatch.setattr(planner.links.LegLinks, "path_margin", deeper)
     sim, ex = new_run(short_plan, None, "feedback")
-    robot, terrain = short_plan.load_robot(), short_plan.load_terrain()
     a, b = plan_step_cycles(short_plan)[0]
     t0 = sim.time
     got = _follow_corrected(
         ex, SimulatedMocap(sim).measure(), robot, terrain, short_plan.samples,
-        short_plan.foot_centres_W(), a, b, sim,
+        short_plan.foot_centres_W(), a, b, sim, local,
     )  # fmt: skip
     assert got is None and sim.time == t0
-    monkeypatch.undo()  # without the violation the same step runs
+    monkeypatch.undo()  # without the violation the same step runs, checked as a planned path
+    monkeypatch.setattr(LocalPlanner, "path_problem", counted)
     assert _follow_corrected(
         ex, SimulatedMocap(sim).measure(), robot, terrain, short_plan.samples,
-        short_plan.foot_centres_W(), a, b, sim,
+        short_plan.foot_centres_W(), a, b, sim, local,
     ) is True and sim.time > t0  # fmt: skip
+    assert checked and checked[-1] in (b - a + 1, b - a + 2)  # with a hold sample or not
+
+
+def test_a_corrected_step_brings_the_body_back_at_the_planners_body_speed(short_plan, monkeypatch):
+    """A body measured 5 cm off the plan against its feet (8.4) is brought back over a
+    four-feet hold no shorter than the body-move time law's rest-to-rest time for 5 cm,
+    not in the plan's own four-feet phase (barrier75mm's body, 2.8 cm off, was pulled back
+    in 0.2 s and the robot tipped and fell); measured on the plan, no hold is added."""
+    import planner.stability
+    from planner.execution import (
+        _correction_time_s,
+        _follow_corrected,
+        _four_feet_span_s,
+        shift_body,
+    )
+    from planner.kinematics import hip_point_B
+    from planner.local.base import BODY_ACCEL_M_S2
+    from planner.simulate import new_run
+
+    robot, terrain, s = short_plan.load_robot(), short_plan.load_terrain(), short_plan.samples
+    zero = np.zeros(3)
+    assert _correction_time_s(robot, zero, zero) < 1e-3
+    off = 0.05
+    need = _correction_time_s(robot, np.array([off, 0.0, 0.0]), zero)
+    assert need == pytest.approx(2.0 * np.sqrt(off / BODY_ACCEL_M_S2))  # below the speed cap
+    lever = max(np.linalg.norm(hip_point_B(leg)) for leg in robot.legs)  # a turn at the hips
+    turn = _correction_time_s(robot, zero, np.array([0.0, 0.0, 0.3]))
+    assert turn == pytest.approx(2.0 * np.sqrt(0.3 * lever / BODY_ACCEL_M_S2))
+    a, b = plan_step_cycles(short_plan)[1]
+    times = s.time[a : b + 1]
+    span = _four_feet_span_s(times, s.contact[a : b + 1])
+    assert 0.0 < span < need
+    sim, ex = new_run(short_plan, None, "feedback")
+    followed = []
+    monkeypatch.setattr(ex, "follow", lambda t, q, contact: followed.append((t, q)) or True)
+    monkeypatch.setattr(planner.stability, "BALANCE_MARGIN_M", -1.0)  # timing only here
+    shifted = shift_body(short_plan, [off, 0.0, 0.0])  # the same feet, the body 5 cm ahead
+    centres = short_plan.foot_centres_W()
+    for q_meas, hold in ((shifted.samples.q[a], need - span), (s.q[a], 0.0)):
+        meas = Measurement(0.0, q_meas.copy(), np.ones(4, bool))
+        assert _follow_corrected(ex, meas, robot, terrain, s, centres, a, b, sim) is True
+        t, q = followed[-1]
+        assert t[-1] - t[0] == pytest.approx(times[-1] - times[0] + hold, abs=1e-9)
+        assert len(t) == len(times) + (hold > 0.0)
+        np.testing.assert_allclose(q[0, :3], q_meas[:3], atol=1e-6)  # from the measured body
+        np.testing.assert_allclose(q[-1, :3], s.q[b, :3], atol=2e-3)  # to the plan's
 
 
 def test_a_correction_keeps_a_leg_on_the_plans_other_knee(short_plan):
