@@ -440,10 +440,14 @@ def run_feedback(
             # else where no body move planned anew reaches the plan's foothold (a hind leg
             # stretched behind a step up); one try per cycle, from this measurement
             may_correct = guided and guide_cycles is not None
+            refused: list[str] = []
             if may_correct and plan_steps_first:
                 ran = _follow_corrected(
-                    ex, meas, robot, terrain, s_plan, centres, *guide_cycles[g], sim, local
-                )
+                    ex, meas, robot, terrain, s_plan, centres, *guide_cycles[g], sim, local,
+                    refused,
+                )  # fmt: skip
+                if refused:
+                    local._log_failure(cycles, leg, "corrected_step", state, refused[-1])
             if guided and ran is None:  # the plan's foothold, from a body ever nearer the incentre
                 for _, shrink in BACKOFF:
                     step = local.step(
@@ -728,7 +732,7 @@ def blend_in(robot, q: _Array, contact: NDArray, times: _Array, current_joints: 
 
 
 def _follow_corrected(
-    ex, meas, robot, terrain, s: Samples, centres, a: int, b: int, sim, local=None
+    ex, meas, robot, terrain, s: Samples, centres, a: int, b: int, sim, local=None, refused=None
 ):
     """Execute plan samples a..b corrected from the measurement ``meas`` (8.4), or None.
 
@@ -756,7 +760,7 @@ def _follow_corrected(
     its steps corrected first: one asked FR's knee for more than the 80 % of its effort a
     path may ask). A body measured off the plan is brought back over a four-feet hold as
     long as :func:`_correction_time_s` asks, where the cycle's own four-feet phase is
-    shorter.
+    shorter. Where a gate refuses, its reason is appended to the list ``refused``.
     """
     from planner.kinematics import kinematics_of
     from planner.lie import rotation_from_quat
@@ -773,7 +777,7 @@ def _follow_corrected(
         plan_centres = np.concatenate([plan_centres[:1], plan_centres])
     q_body, misses = correct_cycle(robot, plan_q, contact, plan_centres, meas, times)
     if misses:
-        return None
+        return _refuse(refused, f"the corrected step leaves a leg's reach at {misses} samples")
     q = blend_in(robot, q_body, contact, times, sim.targets())
     kin, links = kinematics_of(robot), leg_links(robot)
     floor = None
@@ -781,21 +785,30 @@ def _follow_corrected(
         bare = links.path_margin(terrain, qk, np.flatnonzero(~ck), scale=0.0)
         floor = np.minimum(bare, 0.0) if floor is None else floor
         if np.any(bare < floor - 1e-4):
-            return None
+            c = int(np.argmin(bare - floor))
+            return _refuse(refused, f"the corrected step puts the {links.describe(c)} deeper")
         if ck.sum() != 3:
             continue
         R, joints = rotation_from_quat(qk[3:7]), robot.joints_from_q(qk)
         feet = kin.feet_W(qk[:3], R, joints)[ck]
         com = qk[:3] + R @ kin.com_B(joints)
-        if support_margin_m(feet, com) < BALANCE_MARGIN_M:
-            return None
+        if (tip := support_margin_m(feet, com)) < BALANCE_MARGIN_M:
+            why = f"the corrected step's COM {tip * 1000:.1f} mm inside its support"
+            return _refuse(refused, f"{why} (< {BALANCE_MARGIN_M * 1000:.0f} mm)")
     if local is not None:
         centres_W = np.array([_foot_centres(robot, qk) for qk in q_body])
         path = states_of_samples(robot, terrain, q_body, contact, times, centres_W)
-        if local.path_problem(path):
-            return None
+        if why := local.path_problem(path):
+            return _refuse(refused, f"the corrected step: {why}")
     ex.monitor.keyframe(0)
     return ex.follow(times, q, contact)
+
+
+def _refuse(refused: list | None, why: str) -> None:
+    """None (a corrected step not executed), its reason appended to ``refused`` if given."""
+    if refused is not None:
+        refused.append(why)
+    return None
 
 
 def run_corrected(

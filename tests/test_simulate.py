@@ -376,11 +376,14 @@ def test_a_corrected_plan_step_that_fails_a_gate_is_not_executed(short_plan, mon
     sim, ex = new_run(short_plan, None, "feedback")
     a, b = plan_step_cycles(short_plan)[0]
     t0 = sim.time
+    refused = []
     got = _follow_corrected(
         ex, SimulatedMocap(sim).measure(), robot, terrain, short_plan.samples,
-        short_plan.foot_centres_W(), a, b, sim, local,
+        short_plan.foot_centres_W(), a, b, sim, local, refused,
     )  # fmt: skip
     assert got is None and sim.time == t0
+    words = {"balance": "inside its support", "links": "deeper", "path": "torque"}
+    assert len(refused) == 1 and words[gate] in refused[0], refused
     monkeypatch.undo()  # without the violation the same step runs, checked as a planned path
     monkeypatch.setattr(LocalPlanner, "path_problem", counted)
     assert _follow_corrected(
