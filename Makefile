@@ -15,8 +15,11 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(VENV)/bin/stratawalk demo
 
+# the suite on every core (pytest-xdist), a test file per worker at a time so that its
+# module fixtures (plans) are made once; TEST_WORKERS=0 runs it in one process
+TEST_WORKERS ?= auto
 test: $(STAMP)
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile
 
 # Theta1-4: IPOPT (exact derivatives) vs SLSQP (finite differences); ~4 min on 2 cores
 # courses: LittleDog x 17 courses (9 named, 8 of issue 15) x soft/recursive, 240 s budget;
