@@ -612,9 +612,8 @@ def correct_cycle(
     out = plan_q.copy()
     # the measured base relative to the plan's first (shifted) one, faded out over the
     # four-feet phase: a world-frame rotation vector and a translation
-    up = np.flatnonzero(~np.asarray(plan_contact, bool).all(axis=1))
-    k_end = int(up[0]) - 1 if up.size else n - 1
-    d, pos_err, rot_err = _base_error(robot, plan_q[0], plan_contact[0], plan_centres[0], meas)
+    k_end = _four_feet_end(plan_contact)
+    d, pos_err, rot_err = _base_error(plan_q[0], plan_contact[0], plan_centres[0], c_meas, meas)
     clock = np.arange(n, dtype=float) if times is None else np.asarray(times, float)
     span = max(float(clock[max(k_end, 0)] - clock[0]), 1e-9)
     misses = 0
@@ -662,16 +661,18 @@ def correct_cycle(
     return out, misses
 
 
-def _base_error(robot, plan_q0: _Array, plan_contact0: NDArray, plan_centres0: _Array, meas):
+def _base_error(
+    plan_q0: _Array, plan_contact0: NDArray, plan_centres0: _Array, c_meas: _Array, meas
+):
     """(feet's mean offset d (3,), base position error (3,) [m], rotation vector (3,) [rad]).
 
     The measured base against the plan's first sample shifted by the mean offset ``d`` of
-    the measured stance feet from the plan's (world frame), as :func:`correct_cycle` uses.
+    the measured stance feet (sphere centres ``c_meas`` (4, 3), :func:`_foot_centres`) from
+    the plan's (world frame), as :func:`correct_cycle` uses.
     """
     from planner.lie import rotation_from_quat, vector_from_rotation
 
     down = np.asarray(plan_contact0, bool)
-    c_meas = _foot_centres(robot, meas.q)
     d = np.mean((c_meas - plan_centres0)[down], axis=0) if down.any() else np.zeros(3)
     rot_err = vector_from_rotation(
         rotation_from_quat(meas.q[3:7]) @ rotation_from_quat(plan_q0[3:7]).T
@@ -679,11 +680,15 @@ def _base_error(robot, plan_q0: _Array, plan_contact0: NDArray, plan_centres0: _
     return d, meas.q[:3] - (plan_q0[:3] + d), rot_err
 
 
+def _four_feet_end(contact: NDArray) -> int:
+    """Last sample of the four-feet phase that opens a cycle (-1: it opens on three feet)."""
+    up = np.flatnonzero(~np.asarray(contact, bool).all(axis=1))
+    return int(up[0]) - 1 if up.size else len(contact) - 1
+
+
 def _four_feet_span_s(times: _Array, contact: NDArray) -> float:
     """Duration [s] of the four-feet phase that opens a cycle (until its first lift-off)."""
-    up = np.flatnonzero(~np.asarray(contact, bool).all(axis=1))
-    k_end = int(up[0]) - 1 if up.size else len(times) - 1
-    return float(times[max(k_end, 0)] - times[0])
+    return float(times[max(_four_feet_end(contact), 0)] - times[0])
 
 
 def _correction_time_s(robot, pos_err: _Array, rot_err: _Array, local=None) -> float:
@@ -769,7 +774,8 @@ def _follow_corrected(
 
     times, contact = s.time[a : b + 1], s.contact[a : b + 1]
     plan_q, plan_centres = s.q[a : b + 1], centres[a : b + 1]
-    _, pos_err, rot_err = _base_error(robot, plan_q[0], contact[0], plan_centres[0], meas)
+    c_meas = _foot_centres(robot, meas.q)
+    _, pos_err, rot_err = _base_error(plan_q[0], contact[0], plan_centres[0], c_meas, meas)
     hold = _correction_time_s(robot, pos_err, rot_err, local) - _four_feet_span_s(times, contact)
     if hold > 0.0:  # the body is brought back to the plan no faster than the time law allows
         times = np.concatenate([times[:1], times + hold])
