@@ -1037,6 +1037,8 @@ def finish_run(
 
     sim, mon = ex.sim, ex.monitor
     with shielded():  # a second Ctrl-C does not lose the run
+        if not mon.t:  # nothing executed (every step failed): the settled start is held
+            ex.follow(plan.samples.time[:1], plan.samples.q[:1], plan.samples.contact[:1])
         if not ex.stopped and not ex.interrupted:
             ex.hold(sim.settings.hold_s)
         mon.finish(plan, _time.perf_counter() - wall0, t0)

@@ -628,3 +628,27 @@ def test_a_corrected_swing_keeps_the_plans_joints_where_ik_leaves_them(short_pla
     q, _ = correct_cycle(robot, q_plan, contact, centres, meas, s.time[a : b + 1])
     got_j = np.array([robot.joints_from_q(qk)[leg] for qk in q])
     np.testing.assert_array_equal(got_j[air], plan_j[air])
+
+
+def test_a_feedback_run_that_executes_nothing_ends_standing(short_plan, monkeypatch):
+    """No step succeeds from the measured state and the plan's steps are not corrected:
+    the run stops stuck, judged on the settled start it held (it raised an IndexError from
+    the monitor's empty reference), and says so in one line."""
+    import planner.execution as execution
+    from planner.local.base import LocalPlanner
+
+    real = LocalPlanner.step
+
+    def step(self, *args, **kw):
+        out = real(self, *args, **kw)
+        out.ok, out.moved, out.end, out.phase = False, None, None, "foot_placement"
+        out.diagnosis = "refused by the test"
+        return out
+
+    monkeypatch.setattr(LocalPlanner, "step", step)
+    monkeypatch.setattr(execution, "replan_rest", lambda *a: None)
+    res = run_feedback(short_plan, max_cycles=4, correct_plan_steps=False)
+    m, fb = res.metrics, res.executed.stats["feedback"]
+    assert fb["steps"] == 0 and not (m.fell or m.tipped), m.summary()
+    assert not m.reached and "stopped after 4 cycles" in m.message, m.message
+    assert len(res.executed.samples) >= 2  # the held start, recorded
