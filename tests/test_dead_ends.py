@@ -29,10 +29,11 @@ from planner.walk import plan_walk
 
 @pytest.fixture(scope="module")
 def step_up():
-    # a budget never reached (the walk ends at the goal or stuck in 90-160 s): the test is
-    # about the plan, not the machine's speed
+    # a budget never reached: the test is about the plan, not the machine's speed. The goal
+    # 50 cm past the riser, all four feet on top (to 2.2 m the flat top added 100 s of
+    # planning to the suite: 326 s against 224 s, 37 steps and 5 retraces, at 230d21b)
     settings = LocalSettings(time_budget_s=600.0)
-    return plan_walk("littledog", "step10cm", (2.2, 0.0), (0.2, 0.0), "soft", settings=settings)
+    return plan_walk("littledog", "step10cm", (1.3, 0.0), (0.2, 0.0), "soft", settings=settings)
 
 
 def test_soft_traces_back_out_of_a_dead_end(step_up):
@@ -40,9 +41,9 @@ def test_soft_traces_back_out_of_a_dead_end(step_up):
     assert "time budget" not in plan.outcome["message"], plan.outcome["message"]
     assert plan.stats["retraces"] >= 1  # without: stuck with the hind feet below the step
     assert plan.outcome["reached_goal"], plan.outcome["message"]
-    # up the step at least: the front feet beyond the riser (x = 0.8 m) on its top
-    front = np.array(plan.keyframes[-1].feet)[:2]
-    assert np.all(front[:, 0] > 0.8) and np.all(front[:, 2] > 0.099), front
+    # up the step: every foot beyond the riser (x = 0.8 m) on its top
+    feet = np.array(plan.keyframes[-1].feet)
+    assert np.all(feet[:, 0] > 0.8) and np.all(feet[:, 2] > 0.099), feet  # all four on top
     assert report.ok, report
     again = check_plan(plan)  # the independent check of the whole plan
     assert again.ok and not again.violations
