@@ -28,3 +28,13 @@ def short_flat_walk(tmp_path_factory):
     path = plan.save(tmp_path_factory.mktemp("walk") / "plan.json")
     plan = Plan.load(path)
     return path, plan, plan_series(plan)
+
+
+# test files whose module fixtures plan long walks (500 s and 230 s on this 2-core
+# machine): started first, so that with pytest-xdist (make test: a file per worker at a
+# time) the other files share the other worker meanwhile instead of waiting behind them
+LONG_FILES = ("test_climb.py", "test_dead_ends.py")
+
+
+def pytest_collection_modifyitems(config, items):
+    items.sort(key=lambda item: item.path.name not in LONG_FILES)  # stable: else as collected
