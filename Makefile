@@ -16,10 +16,12 @@ demo: $(STAMP)
 	$(VENV)/bin/stratawalk demo
 
 # the suite on every core (pytest-xdist), a test file per worker at a time so that its
-# module fixtures (plans) are made once; TEST_WORKERS=0 runs it in one process
+# module fixtures (plans) are made once, in collection order (tests/conftest.py puts the
+# files that plan long walks first; xdist's default order, most tests first, started the
+# 10 cm climb last); TEST_WORKERS=0 runs it in one process
 TEST_WORKERS ?= auto
 test: $(STAMP)
-	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder
 
 # Theta1-4: IPOPT (exact derivatives) vs SLSQP (finite differences); ~4 min on 2 cores
 # courses: LittleDog x 17 courses (9 named, 8 of issue 15) x soft/recursive, 240 s budget;

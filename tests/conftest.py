@@ -32,7 +32,8 @@ def short_flat_walk(tmp_path_factory):
 
 # test files whose module fixtures plan long walks (500 s and 230 s on this 2-core
 # machine): started first, so that with pytest-xdist (make test: a file per worker at a
-# time) the other files share the other worker meanwhile instead of waiting behind them
+# time, in this order: --no-loadscope-reorder) the other files share the other worker
+# meanwhile instead of waiting behind them
 LONG_FILES = ("test_climb.py", "test_dead_ends.py")
 
 
