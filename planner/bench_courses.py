@@ -346,16 +346,20 @@ def cmd_courses(args) -> int:
         raise InputError(f"--planners: unknown '{bad[0]}'; use soft, hard, recursive, global")
     if not args.time_budget > 0:
         raise InputError(f"--time-budget: must be > 0 s, got {args.time_budget}")
-    result = run_course_bench(
-        robots=names(args.robots, "robots"),
-        courses=expand_courses(names(args.courses, "courses")),
-        planners=planners,
-        time_budget_s=args.time_budget,
-        out_dir=args.out,
-        scheduler=args.scheduler,
-        workers=args.workers,
-        resume=args.resume,
-    )
+    from planner.interrupts import Interrupts
+
+    # Ctrl-C / SIGTERM: the workers stopped, finished jobs kept (as ``stratawalk batch``)
+    with Interrupts(cooperative=args.scheduler is None) as stop:
+        result = run_course_bench(
+            robots=names(args.robots, "robots"),
+            courses=expand_courses(names(args.courses, "courses")),
+            planners=planners,
+            time_budget_s=args.time_budget,
+            out_dir=args.out,
+            scheduler=args.scheduler,
+            workers=args.workers,
+            resume=args.resume,
+        )
     print(render_markdown(result))
     print(f"wrote {Path(args.out) / 'courses.md'} and courses.json, courses.jsonl", file=sys.stderr)
-    return 0
+    return stop.exit_code or 0

@@ -728,7 +728,19 @@ def cmd_physics(args) -> int:
         from planner.settings import preset
 
         preset(args.preset)  # an unknown name fails here, not in every job
-    result = run_physics_bench(
+    from planner.interrupts import Interrupts
+
+    # Ctrl-C / SIGTERM: the running jobs are dropped and their workers stopped (a killed
+    # bench left its pool's workers planning on for an hour), the finished ones written
+    with Interrupts() as stop:
+        result = _run_physics_args(args, courses, modes)
+    print(render_markdown(result))
+    print(f"wrote {Path(args.out) / 'physics.md'} and physics.json, physics.jsonl", file=sys.stderr)
+    return stop.exit_code or 0
+
+
+def _run_physics_args(args, courses, modes) -> dict[str, Any]:
+    return run_physics_bench(
         courses=courses,
         generated=args.generated,
         difficulty=args.difficulty,
@@ -744,6 +756,3 @@ def cmd_physics(args) -> int:
         planner=args.planner,
         preset=args.preset,
     )
-    print(render_markdown(result))
-    print(f"wrote {Path(args.out) / 'physics.md'} and physics.json, physics.jsonl", file=sys.stderr)
-    return 0

@@ -313,8 +313,11 @@ def cmd_robots(args) -> int:
         raise InputError(f"--time-budget: must be > 0 s, got {args.time_budget}")
     if args.workers < 1:
         raise InputError(f"--workers: must be >= 1, got {args.workers}")
-    result = run_robots_bench(robots, kinds, args.time_budget, args.out, args.workers,
-                              args.resume, args.save_plans)  # fmt: skip
+    from planner.interrupts import Interrupts
+
+    with Interrupts() as stop:  # Ctrl-C / SIGTERM: the workers stopped, finished jobs kept
+        result = run_robots_bench(robots, kinds, args.time_budget, args.out, args.workers,
+                                  args.resume, args.save_plans)  # fmt: skip
     print(render_markdown(result))
     print(f"wrote {Path(args.out) / 'robots.md'} and robots.json, robots.jsonl", file=sys.stderr)
-    return 0
+    return stop.exit_code or 0

@@ -349,3 +349,23 @@ def test_ctrl_c_during_simulate_keeps_the_motion(short_flat_walk, tmp_path):
     assert "interrupted" in text and "Traceback" not in err, text + err
     executed = Plan.load(out)
     assert len(executed.samples) > 10
+
+
+def test_sigterm_to_bench_physics_stops_its_workers(tmp_path):
+    """A stopped ``bench physics`` takes its pool's workers with it (killed with SIGTERM,
+    the default handler ended the bench and left a spawned worker planning on for an
+    hour) and writes its tables; exit 143."""
+    out = tmp_path / "out"
+    proc = _start(["bench", "physics", "--courses", "flat", "--modes", "open",
+                   "--workers", "1", "--out", str(out)])  # fmt: skip
+
+    def a_worker():  # the pool's spawned process, planning
+        return any("multiprocessing" in row[2] for row in _running_in_session(proc.pid))
+
+    _wait_for(a_worker, proc, 120, "a pool worker")
+    time.sleep(1.0)
+    proc.send_signal(signal.SIGTERM)
+    _, err = _finish(proc)
+    assert proc.returncode == 143, err
+    assert "Traceback" not in err, err
+    assert (out / "physics.md").exists()
