@@ -733,26 +733,22 @@ def cmd_physics(args) -> int:
     # Ctrl-C / SIGTERM: the running jobs are dropped and their workers stopped (a killed
     # bench left its pool's workers planning on for an hour), the finished ones written
     with Interrupts() as stop:
-        result = _run_physics_args(args, courses, modes)
+        result = run_physics_bench(
+            courses=courses,
+            generated=args.generated,
+            difficulty=args.difficulty,
+            modes=modes,
+            time_budget_s=args.time_budget,
+            time_scale=args.time_scale,
+            out_dir=args.out,
+            workers=args.workers,
+            resume=args.resume,
+            save_plans=args.save_plans,
+            first_seed=args.first_seed,
+            planned_only=args.planned_only,
+            planner=args.planner,
+            preset=args.preset,
+        )
     print(render_markdown(result))
     print(f"wrote {Path(args.out) / 'physics.md'} and physics.json, physics.jsonl", file=sys.stderr)
     return stop.exit_code or 0
-
-
-def _run_physics_args(args, courses, modes) -> dict[str, Any]:
-    return run_physics_bench(
-        courses=courses,
-        generated=args.generated,
-        difficulty=args.difficulty,
-        modes=modes,
-        time_budget_s=args.time_budget,
-        time_scale=args.time_scale,
-        out_dir=args.out,
-        workers=args.workers,
-        resume=args.resume,
-        save_plans=args.save_plans,
-        first_seed=args.first_seed,
-        planned_only=args.planned_only,
-        planner=args.planner,
-        preset=args.preset,
-    )

@@ -94,21 +94,16 @@ def test_overlapped_walk_holds_up_in_mujoco(flat_pair):
     assert not m.fell and not m.tipped and m.max_tilt_error_deg < 5.0, m.summary()
 
 
-@pytest.fixture(scope="module")
-def rough_walk():
-    """A seeded generated course (rough relief and features the planner was not tuned on)."""
+def test_overlap_on_a_generated_rough_course_passes_check():
+    """A seeded generated course (rough relief and features the planner was not tuned on):
+    the overlapped walk validates and some swings overlap."""
     from planner.course_gen import course_goal_xy, generate_course
     from planner.terrain import Terrain
 
     spec = generate_course(seed=3, length_m=1.0, difficulty=0.6)
     terrain = Terrain.from_spec(spec)
     goal = course_goal_xy(spec)
-    return plan_walk("littledog", terrain, goal, (0.2, 0.0), "soft", LocalSettings())
-
-
-def test_overlap_on_a_generated_rough_course_passes_check(rough_walk):
-    """The overlapped walk over relief validates and some swings overlap."""
-    plan, report = rough_walk
+    plan, report = plan_walk("littledog", terrain, goal, (0.2, 0.0), "soft", LocalSettings())
     assert report.ok, report.summary()
     assert _overlapped(plan).any()
 
@@ -132,29 +127,31 @@ def test_overlap_measures_sliding_as_check_does():
     s, rho = plan.samples, robot.foot_radius_m
     model, data = robot.model, robot.model.createData()
     feet = [model.getFrameId(f) for f in robot.foot_frames]
+    centres_W, overlapped = plan.foot_centres_W(), _overlapped(plan)
     lifted = np.flatnonzero(~s.contact.all(axis=1))
     runs = np.split(lifted, np.flatnonzero(np.diff(lifted) > 1) + 1)
     checked = 0
     for run in runs:
         a, b = int(run[0]), int(run[-1])
-        if not np.any(np.linalg.norm(np.diff(s.q[a : b + 1, :3], axis=0), axis=1) > 1e-9):
-            continue  # the body rests during this swing: no overlap
+        if not overlapped[a:b].any():
+            continue  # the body rests during this swing
         leg = int(np.flatnonzero(~s.contact[a])[0])
         stance = [i for i in range(4) if i != leg]
         path = states_of_samples(
             robot, terrain, s.q[a : b + 1], s.contact[a : b + 1], s.time[a : b + 1],
-            plan.foot_centres_W()[a : b + 1],
+            centres_W[a : b + 1],
         )  # fmt: skip
+        c, R = [], []  # Pinocchio's stance foot frames at each sample of the swing
+        for q in s.q[a : b + 1]:
+            pin.framesForwardKinematics(model, data, q)
+            c.append(np.array([data.oMf[feet[i]].translation for i in stance]))
+            R.append(np.array([data.oMf[feet[i]].rotation for i in stance]))
         worst = 0.0
-        for k in range(a, b):
-            c, R = [], []
-            for j in (k, k + 1):
-                pin.framesForwardKinematics(model, data, s.q[j])
-                c.append(np.array([data.oMf[feet[i]].translation for i in stance]))
-                R.append(np.array([data.oMf[feet[i]].rotation for i in stance]))
-            contacts, _ = unique_contact_points(terrain, c[0], rho)
+        for k in range(b - a):
+            contacts, _ = unique_contact_points(terrain, c[k], rho)
             normals = np.asarray(terrain.normal(contacts), float).reshape(-1, 3)
-            worst = max(worst, float(sliding(c[0], c[1], R[0], R[1], normals, rho).max()))
+            slid = sliding(c[k], c[k + 1], R[k], R[k + 1], normals, rho)
+            worst = max(worst, float(slid.max()))
         assert _max_sliding_m(planner, path, leg) == pytest.approx(worst, rel=1e-6, abs=1e-12)
         checked += 1
     assert checked >= 8
