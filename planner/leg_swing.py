@@ -224,11 +224,30 @@ def joint_space_swing(
 
 
 def _sample(free: _Free, lift: State, touch: State, way: _Array, n: int):
-    """``n`` states along the joint polyline ``way`` (arc length, smootherstep in time)."""
+    """States along the joint polyline ``way`` (arc length, smootherstep in time).
+
+    ``n`` samples evenly spaced in time, and one at each interior vertex of ``way``: the
+    executor moves the joints linearly between samples, so two samples on either side of
+    a vertex would cut its corner, through configurations the segment checks never saw
+    (a front knee flipping 140 degrees between two samples out of a 12 cm trench swept
+    the foot through the trench's floor: the open-loop walk fell in MuJoCo). With the
+    vertices, every interval lies on one checked segment.
+    """
     seg = np.linalg.norm(np.diff(way, axis=0), axis=1)
     cum = np.concatenate([[0.0], np.cumsum(seg)])
     s = np.linspace(0.0, 1.0, int(n))
     u = smootherstep(s) * cum[-1]
+    if cum[-1] > 0.0 and len(way) > 2:
+        s_table = np.linspace(0.0, 1.0, 4001)  # smootherstep is increasing: invert by table
+        at = cum[1:-1]
+        s = np.concatenate([s, np.interp(at / cum[-1], smootherstep(s_table), s_table)])
+        u = np.concatenate([u, at])
+        order = np.argsort(u, kind="stable")
+        s, u = s[order], u[order]
+        keep = np.concatenate([[True], np.diff(u) > 1e-9 * max(cum[-1], 1.0)])
+        keep[-1] = True
+        s, u = s[keep], u[keep]
+    n = len(s)
     joints_i = np.column_stack([np.interp(u, cum, way[:, k]) for k in range(3)])
     centres = free.centres_W(joints_i)
     i = free.leg

@@ -42,7 +42,9 @@ Checks (``Violation.kind``), at every sample unless marked keyframe:
     downward-facing faces, which form its lower envelope) below the sharp terrain.
 ``swing_clearance``
     A swing foot's sphere centre closer to the sharp terrain than ``rho - 1e-4 m`` (the
-    sphere penetrates the real surface).
+    sphere penetrates the real surface): at every sample, and between two samples where a
+    joint of its leg moves more than ``BETWEEN_SAMPLES_RAD`` (the executor's linear joint
+    interpolation), every ``BETWEEN_STEP_RAD``.
 ``leg_clearance``
     A thigh or shank capsule (:mod:`planner.links`: the URDF's collision cylinder of the
     link, or its documented stand-in) closer to the sharp terrain than
@@ -837,11 +839,22 @@ class _Checker:
 
     def swing_clearance(self, centres: _Array, report: CheckReport) -> None:
         """Swing spheres vs the sharp terrain: a tile bound first, distances where close."""
-        sm, tol, rho = self.plan.samples, self.tol, self.rho
+        sm, tol = self.plan.samples, self.tol
         ks, ls = np.nonzero(~sm.contact)
         if not len(ks):
             return
-        c = centres[ks, ls]
+        clear = self._sphere_clearances(centres[ks, ls])
+        report.min_swing_clearance_m = float(clear.min())
+        for j in np.flatnonzero(clear < -tol.swing_penetration_m):
+            self._swing_violation(ks[j], ls[j], clear[j])
+        self._swing_between_samples(report)
+
+    def _sphere_clearances(self, c: _Array) -> _Array:
+        """(N,) clearances [m] of foot spheres centred at ``c`` (N, 3) over the sharp terrain.
+
+        A tile bound first; the exact distance where it is under 1 mm.
+        """
+        rho = self.rho
         reach = rho + _TileMax.NODE_M
         boxes = np.column_stack(
             [c[:, 0] - reach, c[:, 0] + reach, c[:, 1] - reach, c[:, 1] + reach]
@@ -849,20 +862,52 @@ class _Checker:
         clear = c[:, 2] - rho - self.tiles.max_in(boxes) - _TileMax.SLACK_M  # a lower bound
         near = np.flatnonzero(clear < 1e-3)
         if len(near):
-            d = sharp_surface_distance(self.terrain, c[near], rho + 1e-3, tol.surface_step_m)
+            d = sharp_surface_distance(self.terrain, c[near], rho + 1e-3, self.tol.surface_step_m)
             clear[near] = d - rho
-        report.min_swing_clearance_m = float(clear.min())
+        return clear
+
+    def _swing_violation(self, k: int, leg: int, clear: float, extra: str = "") -> None:
+        tol, rho = self.tol, self.rho
+        self.add(
+            "swing_clearance",
+            f"sample {k}",
+            leg,
+            -clear,
+            tol.swing_penetration_m,
+            f"{_leg(leg)} swing foot sphere penetrates the sharp terrain by "
+            f"{'at least ' if -clear >= rho else ''}{_mm(-clear)}{extra} (limit "
+            f"{_mm(tol.swing_penetration_m)})",
+        )
+
+    def _swing_between_samples(self, report: CheckReport) -> None:
+        """Swing spheres between two samples where their leg's joints jump (``swing_clearance``).
+
+        Where a joint of the leg moves more than ``BETWEEN_SAMPLES_RAD``, at configurations
+        ``BETWEEN_STEP_RAD`` apart: the executor interpolates the joints linearly, and a
+        knee flipping between two clear samples can sweep the foot through the terrain (as
+        :meth:`leg_clearance` does the links).
+        """
+        sm, tol = self.plan.samples, self.tol
+        where, centres = [], []  # (interval, leg) of each swept sphere centre
+        for k in range(len(sm) - 1):
+            legs = [i for i in range(4) if not (sm.contact[k, i] and sm.contact[k + 1, i])]
+            dq = np.abs(sm.q[k + 1, 7:] - sm.q[k, 7:]).reshape(4, 3).max(axis=1)
+            if not legs or float(dq[legs].max()) <= BETWEEN_SAMPLES_RAD:
+                continue
+            m = int(math.ceil(float(dq[legs].max()) / BETWEEN_STEP_RAD))
+            for u in np.arange(1, m) / m:
+                feet = self.kinematics(between_q(sm.q[k], sm.q[k + 1], u))[0]
+                where += [(k, i) for i in legs]
+                centres += [feet[i] for i in legs]
+        if not centres:
+            return
+        clear = self._sphere_clearances(np.array(centres))
+        report.min_swing_clearance_m = min(report.min_swing_clearance_m, float(clear.min()))
+        worst: dict[tuple[int, int], float] = {}
         for j in np.flatnonzero(clear < -tol.swing_penetration_m):
-            self.add(
-                "swing_clearance",
-                f"sample {ks[j]}",
-                ls[j],
-                -clear[j],
-                tol.swing_penetration_m,
-                f"{_leg(ls[j])} swing foot sphere penetrates the sharp terrain by "
-                f"{'at least ' if -clear[j] >= rho else ''}{_mm(-clear[j])} (limit "
-                f"{_mm(tol.swing_penetration_m)})",
-            )
+            worst[where[j]] = min(worst.get(where[j], 0.0), float(clear[j]))
+        for (k, i), value in sorted(worst.items()):
+            self._swing_violation(k, i, value, f" between it and {k + 1}")
 
     def joint_torques(self, contacts: _Array, report: CheckReport) -> None:
         """Joint torques within the URDF effort limits (``joint_torque``)."""

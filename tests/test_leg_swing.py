@@ -164,3 +164,31 @@ def test_a_knee_flip_near_its_limit_keeps_the_foot_above_the_ground(littledog):
         assert sharp_surface_distance(terrain, centre[None], 0.05, step_m=1e-3)[0] >= rho
     # the knee changes branch in the air: the foot's last samples are on the landing's
     assert kin.knee_direction(3, path[-2].joints_rad[3]) == kin.knee_direction(3, touch_joints[3])
+
+
+@pytest.mark.parametrize("n", [4, 6])
+def test_a_coarse_joint_space_swing_keeps_its_corners(littledog, over_the_barrier, n):
+    """Few samples over the barrier: the executor's straight joint lines between two
+    samples (planner.interpolate.between_q) keep the foot and links as clear as the checked
+    segments, since every vertex of the joint path is a sample. Before, samples on either
+    side of a vertex cut its corner (a knee flipped 140 degrees between two samples out of
+    a 12 cm trench and the foot swept the trench's floor)."""
+    from planner.interpolate import between_q
+
+    terrain, lift, touch = over_the_barrier
+    path = joint_space_swing(littledog, terrain, lift, touch, n, 0)
+    assert path is not None
+    assert len(path) >= n
+    inner = []
+    for a, b in zip(path[:-1], path[1:], strict=True):
+        qa = littledog.q_from(a.base_position_W, a.base_quaternion_xyzw, a.joints_rad)
+        qb = littledog.q_from(b.base_position_W, b.base_quaternion_xyzw, b.joints_rad)
+        for u in np.linspace(0.0, 1.0, 12)[1:-1]:
+            q = between_q(qa, qb, u)
+            s = a.copy()
+            s.joints_rad = littledog.joints_from_q(q)
+            s.info = {"nu": 0.5}
+            inner.append(s)
+    leg_clear, foot_clear = _clearances(littledog, terrain, inner)
+    assert leg_clear > 0.0, leg_clear
+    assert foot_clear > 0.0, foot_clear

@@ -167,8 +167,11 @@ def test_swing_foot_in_the_ground_fails(flat_plan, littledog):
     q[leg.q_index : leg.q_index + 3] = ik[0].joints_rad
     report = check_plan(plan)
     viols = [v for v in report.violations if v.kind == "swing_clearance"]
-    assert [(v.where, v.leg) for v in viols] == [(f"sample {k}", 1)]
-    assert viols[0].value == pytest.approx(0.004, abs=2e-5)
+    at = [v for v in viols if "between" not in v.message]
+    assert [(v.where, v.leg) for v in at] == [(f"sample {k}", 1)]
+    assert at[0].value == pytest.approx(0.004, abs=2e-5)
+    # the executor's lines into that sample and out of it dip as well, no deeper
+    assert all(v.value <= 0.004 + 2e-5 for v in viols)
     assert report.min_swing_clearance_m == pytest.approx(-0.004, abs=2e-5)
 
 
@@ -266,6 +269,21 @@ def test_contact_points_from_either_convention():
     np.testing.assert_allclose(contact_from_foot_centre(terrain, c, rho), r, atol=1e-9)
 
 
+def _knee_flipped_mid_swing(flat_plan, littledog):
+    """A copy of the plan whose FL swing sample after MID_SWING has the same foot point on
+    the other knee branch: (plan, MID_SWING, q of MID_SWING)."""
+    plan = edited(flat_plan)
+    k = MID_SWING
+    q = plan.samples.q[k].copy()
+    kin = kinematics_of(littledog)
+    th = q[7:10]
+    other = kin.ik_leg(0, kin.foot_B(0, th), knee=-kin.knee_direction(0, th))
+    assert other.reachable and float(np.max(np.abs(other.joints_rad - th))) > 1.0
+    plan.samples.q[k + 1] = q
+    plan.samples.q[k + 1, 7:10] = other.joints_rad  # the same foot point, the other knee
+    return plan, k, q
+
+
 def test_a_knee_flipping_between_two_clear_samples_through_a_wall_fails(flat_plan, littledog):
     """The executor interpolates joints linearly: a knee flipped between two samples sweeps
     its shank lower than either sample. A wall under the sweep's lowest point (3 mm into
@@ -278,15 +296,7 @@ def test_a_knee_flipping_between_two_clear_samples_through_a_wall_fails(flat_pla
     from planner.state import State
     from planner.terrain import Terrain
 
-    plan = edited(flat_plan)
-    k = MID_SWING
-    q = plan.samples.q[k].copy()
-    kin = kinematics_of(littledog)
-    th = q[7:10]
-    other = kin.ik_leg(0, kin.foot_B(0, th), knee=-kin.knee_direction(0, th))
-    assert other.reachable and float(np.max(np.abs(other.joints_rad - th))) > 1.0
-    plan.samples.q[k + 1] = q
-    plan.samples.q[k + 1, 7:10] = other.joints_rad  # the same foot point, the other knee
+    plan, k, q = _knee_flipped_mid_swing(flat_plan, littledog)
     links = LegLinks(littledog)
     fl = np.array([links.capsules[c].leg == 0 for c in links.owner])
     mid = links.axis_points_W(between_q(q, plan.samples.q[k + 1], 0.5))[fl]
@@ -311,3 +321,48 @@ def test_a_knee_flipping_between_two_clear_samples_through_a_wall_fails(flat_pla
     bares = links.path_margins(terrain, ends, [[0], [0]], scales=(0.0,))[0]
     why = planner._between_samples(states, ends, links, bares)
     assert "FL" in why and "between samples 0 and 1" in why, why
+
+
+def test_a_swing_foot_swept_through_the_ground_between_two_samples_fails(flat_plan, littledog):
+    """The foot sphere as the leg links above: a knee flipped between two clear samples
+    sweeps the foot lower than either; a block under the sweep's lowest foot centre (3 mm
+    into the sphere, clear of both samples) is a swing_clearance violation between the
+    samples, for check and for the planner's path check. (A 12 cm trench's plan passed
+    check so and fell in MuJoCo: the foot struck the trench's floor between two samples.)"""
+    import pinocchio as pin
+
+    from planner.interpolate import between_q
+    from planner.local.soft import SoftPlanner
+    from planner.state import State
+    from planner.terrain import Terrain
+
+    plan, k, q = _knee_flipped_mid_swing(flat_plan, littledog)
+    kin = kinematics_of(littledog)
+
+    def foot_W(qq):
+        R = pin.Quaternion(qq[6], qq[3], qq[4], qq[5]).toRotationMatrix()
+        return R @ kin.foot_B(0, qq[7:10]) + qq[:3]
+
+    sweep = [foot_W(between_q(q, plan.samples.q[k + 1], u)) for u in np.linspace(0, 1, 41)]
+    low = min(sweep, key=lambda c: c[2])
+    rho = littledog.foot_radius_m
+    assert foot_W(q)[2] - low[2] > 0.01  # the sweep dips well below the samples' foot
+    plan.terrain = wall_into(plan.terrain, low, rho, 0.02)
+    report = check_plan(plan)
+    swept = [v for v in report.violations if v.kind == "swing_clearance"]
+    assert swept and swept[0].where == f"sample {k}" and swept[0].leg == 1, report
+    assert "between it and" in swept[0].message
+    assert swept[0].value == pytest.approx(0.003, abs=5e-4)
+    # the planner's path check sees it too
+    terrain = Terrain.from_spec(plan.terrain)
+    planner = SoftPlanner(littledog, terrain)
+    states = []
+    for qq in (q, plan.samples.q[k + 1]):
+        R = pin.Quaternion(qq[6], qq[3], qq[4], qq[5]).toRotationMatrix()
+        states.append(State(qq[:3].copy(), R, np.zeros((4, 3)), qq[7:].reshape(4, 3).copy(), 1,
+                            (1, 2, 3)))  # fmt: skip
+    ends = [q, plan.samples.q[k + 1]]
+    m = int(np.ceil(np.abs(ends[1][7:] - ends[0][7:]).max() / 0.05))
+    inner = [between_q(ends[0], ends[1], u) for u in np.arange(1, m) / m]
+    why = planner._feet_between_samples(states, [(0, (0,), [0], inner, 1.0)])
+    assert "FL foot passes" in why and "between samples 0 and 1" in why, why
