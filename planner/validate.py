@@ -847,7 +847,7 @@ class _Checker:
         report.min_swing_clearance_m = float(clear.min())
         for j in np.flatnonzero(clear < -tol.swing_penetration_m):
             self._swing_violation(ks[j], ls[j], clear[j])
-        self._swing_between_samples(report)
+        self._swing_between_samples(centres, report)
 
     def _sphere_clearances(self, c: _Array) -> _Array:
         """(N,) clearances [m] of foot spheres centred at ``c`` (N, 3) over the sharp terrain.
@@ -879,16 +879,18 @@ class _Checker:
             f"{_mm(tol.swing_penetration_m)})",
         )
 
-    def _swing_between_samples(self, report: CheckReport) -> None:
+    def _swing_between_samples(self, centres: _Array, report: CheckReport) -> None:
         """Swing spheres between two samples where their leg's joints jump (``swing_clearance``).
 
         Where a joint of the leg moves more than ``BETWEEN_SAMPLES_RAD``, at configurations
         ``BETWEEN_STEP_RAD`` apart: the executor interpolates the joints linearly, and a
         knee flipping between two clear samples can sweep the foot through the terrain (as
-        :meth:`leg_clearance` does the links).
+        :meth:`leg_clearance` does the links). An interval that starts or ends with the
+        foot down may go as deep as the foot stands there (near an edge a foot on the
+        smooth terrain overlaps the sharp one a little, ``foot_off_sharp_surface``).
         """
         sm, tol = self.plan.samples, self.tol
-        where, centres = [], []  # (interval, leg) of each swept sphere centre
+        where, swept = [], []  # (interval, leg) of each swept sphere centre
         for k in range(len(sm) - 1):
             legs = [i for i in range(4) if not (sm.contact[k, i] and sm.contact[k + 1, i])]
             dq = np.abs(sm.q[k + 1, 7:] - sm.q[k, 7:]).reshape(4, 3).max(axis=1)
@@ -898,16 +900,19 @@ class _Checker:
             for u in np.arange(1, m) / m:
                 feet = self.kinematics(between_q(sm.q[k], sm.q[k + 1], u))[0]
                 where += [(k, i) for i in legs]
-                centres += [feet[i] for i in legs]
-        if not centres:
+                swept += [feet[i] for i in legs]
+        if not swept:
             return
-        clear = self._sphere_clearances(np.array(centres))
+        clear = self._sphere_clearances(np.array(swept))
         report.min_swing_clearance_m = min(report.min_swing_clearance_m, float(clear.min()))
         worst: dict[tuple[int, int], float] = {}
         for j in np.flatnonzero(clear < -tol.swing_penetration_m):
             worst[where[j]] = min(worst.get(where[j], 0.0), float(clear[j]))
         for (k, i), value in sorted(worst.items()):
-            self._swing_violation(k, i, value, f" between it and {k + 1}")
+            down = [kk for kk in (k, k + 1) if sm.contact[kk, i]]
+            ends = self._sphere_clearances(centres[down, i]) if down else np.zeros(0)
+            if value < min(float(ends.min(initial=0.0)), 0.0) - tol.swing_penetration_m:
+                self._swing_violation(k, i, value, f" between it and {k + 1}")
 
     def joint_torques(self, contacts: _Array, report: CheckReport) -> None:
         """Joint torques within the URDF effort limits (``joint_torque``)."""
