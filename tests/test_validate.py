@@ -361,8 +361,8 @@ def test_a_swing_foot_swept_through_the_ground_between_two_samples_fails(flat_pl
         R = pin.Quaternion(qq[6], qq[3], qq[4], qq[5]).toRotationMatrix()
         states.append(State(qq[:3].copy(), R, np.zeros((4, 3)), qq[7:].reshape(4, 3).copy(), 1,
                             (1, 2, 3)))  # fmt: skip
+    links = leg_links(littledog)
     ends = [q, plan.samples.q[k + 1]]
-    m = int(np.ceil(np.abs(ends[1][7:] - ends[0][7:]).max() / 0.05))
-    inner = [between_q(ends[0], ends[1], u) for u in np.arange(1, m) / m]
-    why = planner._feet_between_samples(states, [(0, (0,), [0], inner, 1.0)])
+    bares = links.path_margins(terrain, ends, [[0], [0]], scales=(0.0,))[0]
+    why = planner._between_samples(states, ends, links, bares)  # the links clear: the foot
     assert "FL foot passes" in why and "between samples 0 and 1" in why, why
