@@ -40,6 +40,7 @@ if TYPE_CHECKING:
     from planner.terrain import Terrain
 
 __all__ = [
+    "COMMANDED_FRICTION_SHARES",
     "COMMANDED_TORQUE_FRACTION",
     "TorqueCheck",
     "TorqueFeasibility",
@@ -55,6 +56,15 @@ _SOLVED = ("Solved", "AlmostSolved")
 # achievable ratio relies on internal foot forces no servo produces (barrier75mm: 49 %
 # achievable, 102 % commanded, and the HL knee saturated and the body yawed 6 degrees)
 COMMANDED_TORQUE_FRACTION = 0.8
+# shares of the friction coefficient the commanded (feed-forward) distribution may use, the
+# smallest first whose forces load no joint beyond COMMANDED_TORQUE_FRACTION (else the whole
+# cone): the least-squares forces lean along the legs, so on an incline they sat on the
+# cone's edge (incline18's soft plan: 77 % of its samples had a stance foot at
+# |f_t| = mu f_n) and the servos' errors pushed feet over it: HR slid 15 mm down the incline
+# with feedback and the walk stalled 136 cm short. Commanded within 0.7 mu, the same plan
+# slid 2.8 mm and reached (open loop 5.2 -> 2.7 mm); 0.7 alone loads the hind knees beyond
+# the fraction in a third of its samples, where 0.8 does not
+COMMANDED_FRICTION_SHARES = (0.7, 0.8, 0.9)
 CONE_SLACK = 1e-6  # least-squares forces this far (x the weight) inside every cone skip the SOCP
 _E_Z = np.array([0.0, 0.0, 1.0])
 
@@ -219,20 +229,36 @@ class TorqueCheck:
         uniform servos settle into without feed-forward) it loaded LittleDog's 0.6 N m knees
         to 80 % in half the three-leg samples of a stepping-stones plan (max 107 %), weighted
         to 42 % (max 62 %); the least achievable ratio (37 %, max 61 %) needs internal foot
-        forces at the edge of the friction cones.
+        forces at the edge of the friction cones. The least-squares forces stay in the cones
+        of the first of ``COMMANDED_FRICTION_SHARES`` x ``mu`` that admit a balance loading
+        no joint beyond ``COMMANDED_TORQUE_FRACTION`` of its effort, else in those of ``mu``.
         """
         model, data = self.model, self.data
         q = np.asarray(q, float)
         sup = [int(i) for i in support]
-        k = len(sup)
         n = np.asarray(normals_W, float).reshape(4, 3)[sup]
         g = pin.computeGeneralizedGravity(model, data, q)
         jt = self._contact_jacobian_T(q, sup, normals_W)  # (nv, 3k)
+        if not least_squares:
+            return self._socp(g, jt, sup, n, mu, False)
+        # the largest friction reserve that loads no joint beyond the commanded fraction
+        for share in COMMANDED_FRICTION_SHARES:
+            res = self._least_squares(g, jt, sup, n, share * mu)
+            if res.status in _SOLVED and res.ratio <= COMMANDED_TORQUE_FRACTION:
+                return res
+        return self._least_squares(g, jt, sup, n, mu)
+
+    def _least_squares(self, g, jt, sup, n, mu: float) -> TorqueFeasibility:
+        """The effort-weighted least-squares distribution in the cones of ``mu``."""
+        f = self._least_squares_inside_cones(jt, g, n, mu)
+        if f is not None:
+            return self._feasibility(g, jt, sup, f, "Solved")
+        return self._socp(g, jt, sup, n, mu, least_squares=True)
+
+    def _socp(self, g, jt, sup, n, mu: float, least_squares: bool) -> TorqueFeasibility:
+        """:meth:`solve`'s SOCP (Clarabel) in the friction cones of ``mu``."""
+        k = len(sup)
         base = self.base_idx
-        if least_squares:
-            f = self._least_squares_inside_cones(jt, g, n, mu)
-            if f is not None:
-                return self._feasibility(g, jt, sup, f, "Solved")
         limited = [c for c in range(12) if math.isfinite(self.effort[c])]
         nv = 3 * k + 1  # forces, then s
         rows, b, cones = [], [], []

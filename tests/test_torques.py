@@ -20,8 +20,10 @@ def flat_plan(tmp_path_factory):
     return plan
 
 
-def _rnea_torques(robot, q, forces_W, rho=0.0103):
-    """tau = g(q) - sum J^T f by RNEA with the contact forces as external joint forces."""
+def _rnea_torques(robot, q, forces_W, rho=0.0103, normals=None):
+    """tau = g(q) - sum J^T f by RNEA with the contact forces as external joint forces.
+
+    Contact points c - rho n (``normals`` (4, 3); None: flat ground)."""
     model, data = robot.model, robot.model.createData()
     pin.framesForwardKinematics(model, data, q)
     fext = [pin.Force.Zero() for _ in range(model.njoints)]
@@ -31,7 +33,8 @@ def _rnea_torques(robot, q, forces_W, rho=0.0103):
             continue
         fr = model.frames[model.getFrameId(frame)]
         M = data.oMi[fr.parentJoint]
-        point = data.oMf[model.getFrameId(frame)].translation - [0.0, 0.0, rho]  # flat ground
+        up = [0.0, 0.0, 1.0] if normals is None else normals[i]
+        point = data.oMf[model.getFrameId(frame)].translation - rho * np.asarray(up)
         R = M.rotation
         fext[fr.parentJoint] += pin.Force(R.T @ f, R.T @ np.cross(point - M.translation, f))
     nv = model.nv
@@ -78,6 +81,52 @@ def test_check_rejects_torques_beyond_the_limit(flat_plan, tmp_path):
     assert all("knee" in v.message and v.value > 1.0 for v in torque)
     assert "x its effort limit 0.05 N m" in torque[0].message
     assert report.max_torque_ratio > 1.0
+
+
+def test_commanded_forces_keep_a_friction_reserve(flat_plan, littledog, monkeypatch):
+    """On an 18 degree incline the least-squares forces lean along the legs onto the cones'
+    edges; the commanded distribution stays in cones of the first of
+    COMMANDED_FRICTION_SHARES x mu (the rest a reserve for the servos' errors) that balance
+    the robot loading no joint beyond COMMANDED_TORQUE_FRACTION, else in the whole cone.
+    Balance by RNEA; the cones measured on the forces."""
+    import planner.torques as torques
+
+    tilt = np.radians(18.0)
+    n = np.tile([-np.sin(tilt), 0.0, np.cos(tilt)], (4, 1))  # uphill in +x
+    tc = TorqueCheck(littledog)
+    share = torques.COMMANDED_FRICTION_SHARES[0]
+    assert 0.0 < share < 1.0
+
+    def cone_ratios(res, sup):  # |f_t| / f_n per stance foot
+        fn = np.einsum("ij,ij->i", res.forces_W[sup], n[sup])
+        ft = np.linalg.norm(res.forces_W[sup] - fn[:, None] * n[sup], axis=1)
+        assert np.all(fn > 0.0)
+        return ft / fn
+
+    for k in (0, len(flat_plan.samples) // 3, len(flat_plan.samples) // 2):
+        q = flat_plan.samples.q[k]
+        sup = np.flatnonzero(flat_plan.samples.contact[k])
+        for mu in (0.7, 0.4):  # tan 18 deg = 0.32: 0.7 x 0.4 = 0.28 cannot hold the robot
+            res = tc.solve(q, sup, mu, n, least_squares=True)
+            assert res.status == "Solved"
+            assert np.abs(_rnea_torques(littledog, q, res.forces_W, normals=n)[:6]).max() < 1e-6
+            cap = share * mu if share * mu > np.tan(tilt) else mu
+            assert cone_ratios(res, sup).max() <= cap + 1e-6
+            assert cone_ratios(res, sup).max() > np.tan(tilt)  # some foot leans (not vacuous)
+            if mu == 0.7:  # the reserve is kept here: a 0.8 fraction is not reached
+                assert res.ratio <= torques.COMMANDED_TORQUE_FRACTION
+        # without the reserve the same stance puts a foot on the whole cone's edge, and so
+        # does the reserve's fallback where every share would load a joint beyond the fraction
+        monkeypatch.setattr(torques, "COMMANDED_FRICTION_SHARES", ())
+        edge = tc.solve(q, sup, 0.7, n, least_squares=True)
+        monkeypatch.undo()
+        assert cone_ratios(edge, sup).max() > share * 0.7 + 1e-3
+        reserved = tc.solve(q, sup, 0.7, n, least_squares=True)
+        assert reserved.ratio > edge.ratio + 1e-3  # the reserve costs torque
+        monkeypatch.setattr(torques, "COMMANDED_TORQUE_FRACTION", edge.ratio + 1e-6)
+        fallback = tc.solve(q, sup, 0.7, n, least_squares=True)
+        monkeypatch.undo()
+        np.testing.assert_allclose(fallback.forces_W, edge.forces_W, atol=1e-4)
 
 
 def test_no_balance_is_infinite(littledog):
