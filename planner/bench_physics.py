@@ -183,6 +183,8 @@ def _sim_fields(metrics: dict) -> dict[str, Any]:
         "max_slip_mm": scaled("max_slip_m", 1000.0),
         "max_sliding_mm": scaled("max_sliding_m", 1000.0),
         "saturation_pct": scaled("saturation_frac", 100.0),
+        "three_leg_load_pct": scaled("max_three_leg_load", 100.0),
+        "load_over_plan_pct": scaled("max_load_over_plan", 100.0),
         "sim_time_s": scaled("sim_time_s", 1.0),
         "message": str(metrics.get("message", "")),
     }

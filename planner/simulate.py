@@ -661,6 +661,10 @@ class Metrics:
     joint_rms_rad: float = 0.0  # set-point tracking
     joint_max_rad: float = 0.0
     saturation_frac: float = 0.0  # fraction of control ticks with a servo at its limit
+    # on three planned stance legs: the largest |servo torque| / URDF effort of their joints,
+    # and its largest excess over the feed-forward's (the planned commanded distribution's)
+    max_three_leg_load: float = 0.0
+    max_load_over_plan: float = 0.0
     cycles: int = 0
     replans: int = 0  # feedback: planning failures that cost a cycle
     ik_misses: int = 0  # correction: set-points out of reach (closest taken)
@@ -698,7 +702,9 @@ class Metrics:
             f"stance foot off terrain {self.lost_contact_s:.2f} s",
             f"  joint tracking rms {math.degrees(self.joint_rms_rad):.2f} deg, max "
             f"{math.degrees(self.joint_max_rad):.2f} deg; servos saturated "
-            f"{100 * self.saturation_frac:.1f} % of ticks",
+            f"{100 * self.saturation_frac:.1f} % of ticks; on three legs up to "
+            f"{100 * self.max_three_leg_load:.0f} % of a stance joint's effort, "
+            f"{100 * self.max_load_over_plan:.0f} % over the feed-forward",
             f"  {self.cycles} cycles, {self.sim_time_s:.1f} s simulated in {self.wall_time_s:.1f}"
             " s",
         ]
@@ -789,6 +795,12 @@ class Monitor:
         self._n += 1
         m.joint_max_rad = max(m.joint_max_rad, float(err.max()))
         self._sat += int(sim.saturated())
+        if int(stance.sum()) == 3:  # the servos' load against the commanded (planned) one
+            j = (3 * np.flatnonzero(stance)[:, None] + np.arange(3)).ravel()
+            load = np.abs(sim.data.actuator_force[j]) / sim.effort[j]
+            planned = np.abs(self.feedforward_at(t)[j]) / sim.effort[j]
+            m.max_three_leg_load = max(m.max_three_leg_load, float(load.max()))
+            m.max_load_over_plan = max(m.max_load_over_plan, float((load - planned).max()))
         touch = sim.touches()
         feet, body, legs = touch.feet, touch.body, touch.legs
         R = sim.base_rotation()

@@ -135,6 +135,25 @@ def test_open_loop_short_flat_walk_reaches_without_falling(short_plan, open_loop
     assert m.saturation_frac < 0.05  # the 0.6 N m knees are enough for this walk
 
 
+def test_three_leg_servo_loads_are_measured_against_statics(short_plan, open_loop):
+    """On three legs the servos carry at least what statics needs: the largest load the run
+    reports is no less than the least achievable ratio (any admissible forces, Clarabel) at
+    the plan's three-leg samples, and no more than the effort limit; the excess over the
+    feed-forward is part of it."""
+    from planner.torques import TorqueCheck
+
+    m = open_loop.metrics
+    tc = TorqueCheck(short_plan.load_robot())
+    s = short_plan.samples
+    three = [k for k in range(len(s)) if s.contact[k].sum() == 3]
+    up = np.tile([0.0, 0.0, 1.0], (4, 1))
+    least = max(tc.solve(s.q[k], np.flatnonzero(s.contact[k]), 0.7, up).ratio for k in three)
+    assert 0.2 < least < 1.0
+    assert 0.95 * least <= m.max_three_leg_load <= 1.0 + 1e-9, m.summary()
+    assert 0.0 < m.max_load_over_plan < m.max_three_leg_load, m.summary()
+    assert "on three legs up to" in m.summary()
+
+
 def test_executed_motion_is_a_plan_file(open_loop, tmp_path):
     path = open_loop.executed.save(tmp_path / "sim.json")
     back = Plan.load(path)
