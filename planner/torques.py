@@ -190,14 +190,13 @@ class TorqueCheck:
         worst = int(np.argmax(ratios))
         return TorqueFeasibility(float(ratios[worst]), tau, forces, worst, status)
 
-    def _least_squares_inside_cones(self, jt: _Array, g: _Array, n: _Array, mu: float):
-        """The effort-weighted least-squares balancing forces (3k,), or None.
+    def _least_squares_forces(self, jt: _Array, g: _Array):
+        """The effort-weighted least-squares balancing forces (3k,) without cones, or None.
 
         Without the friction cones the problem of :meth:`solve` (``least_squares``) is an
-        equality-constrained least-squares problem, solved by its KKT system; where that
-        solution lies inside every cone (by ``CONE_SLACK`` x the weight) the cones are not
-        active and it is also the optimum with them, so the SOCP is not needed. None (solve
-        the SOCP) where a cone is active or the system is singular.
+        equality-constrained least-squares problem, solved by its KKT system (once per
+        configuration: only the cone test depends on the friction share). None where the
+        system is singular or its solution does not balance the robot.
         """
         kkt, a = self._weighted_kkt(jt)
         b = jt[self.base_idx]
@@ -210,12 +209,19 @@ class TorqueCheck:
         weight = float(np.linalg.norm(g[self.base_idx][:3]))
         if not np.all(np.isfinite(f)) or np.linalg.norm(b @ f - g[self.base_idx]) > 1e-9 * weight:
             return None
+        return f
+
+    @staticmethod
+    def _inside_cones(f: _Array, n: _Array, mu: float, weight_n: float) -> bool:
+        """Whether forces ``f`` (3k,) lie inside every cone of ``mu`` by ``CONE_SLACK``.
+
+        There the cones are not active and the least-squares forces are also the optimum
+        with them, so the SOCP is not needed.
+        """
         fk = f.reshape(-1, 3)
         normal = np.einsum("ij,ij->i", fk, n)
         tangential = np.linalg.norm(fk - normal[:, None] * n, axis=1)
-        if np.any(mu * normal - tangential < CONE_SLACK * weight):
-            return None
-        return f
+        return bool(np.all(mu * normal - tangential >= CONE_SLACK * weight_n))
 
     def solve(
         self, q: _Array, support, mu: float, normals_W: _Array, least_squares: bool = False
@@ -242,16 +248,16 @@ class TorqueCheck:
         if not least_squares:
             return self._socp(g, jt, sup, n, mu, False)
         # the largest friction reserve that loads no joint beyond the commanded fraction
+        f = self._least_squares_forces(jt, g)
+        weight_n = float(np.linalg.norm(g[self.base_idx][:3]))
         for share in COMMANDED_FRICTION_SHARES:
-            res = self._least_squares(g, jt, sup, n, share * mu)
+            if f is not None and self._inside_cones(f, n, share * mu, weight_n):
+                # inside these cones, inside every wider one too: the same forces for all
+                return self._feasibility(g, jt, sup, f, "Solved")
+            res = self._socp(g, jt, sup, n, share * mu, least_squares=True)
             if res.status in _SOLVED and res.ratio <= COMMANDED_TORQUE_FRACTION:
                 return res
-        return self._least_squares(g, jt, sup, n, mu)
-
-    def _least_squares(self, g, jt, sup, n, mu: float) -> TorqueFeasibility:
-        """The effort-weighted least-squares distribution in the cones of ``mu``."""
-        f = self._least_squares_inside_cones(jt, g, n, mu)
-        if f is not None:
+        if f is not None and self._inside_cones(f, n, mu, weight_n):
             return self._feasibility(g, jt, sup, f, "Solved")
         return self._socp(g, jt, sup, n, mu, least_squares=True)
 
