@@ -763,9 +763,10 @@ def _follow_corrected(
     samples, friction cones, joint torques, the final stance's sway), so that a corrected
     step is never held to less than a step planned anew (barrier75mm's plan of 1bc79ed,
     its steps corrected first: one asked FR's knee for more than the 80 % of its effort a
-    path may ask). A body measured off the plan is brought back over a four-feet hold as
-    long as :func:`_correction_time_s` asks, where the cycle's own four-feet phase is
-    shorter. Where a gate refuses, its reason is appended to the list ``refused``.
+    path then allowed; 70 % since). A body measured off the plan is brought back over a
+    four-feet hold as long as :func:`_correction_time_s` asks, where the cycle's own
+    four-feet phase is shorter. Where a gate refuses, its reason is appended to the list
+    ``refused``.
     """
     from planner.kinematics import kinematics_of
     from planner.lie import rotation_from_quat

@@ -77,8 +77,9 @@ class ThetaOptions:
         solved again with the torque rows (:func:`planner.torques.least_squares_ratios_ca`).
         None: off. Without it Theta2 chose three-leg stances whose hind knee needed 93-140 %
         of its 0.6 N m on an 18 degree incline and an 8 cm step down, and the swing from
-        there failed. 0.75 (a margin below the paths') cost the 10 cm climb
-        (``tests/test_climb.py``): the recursive planner ran out of time.
+        there failed. A margin below the paths' (0.75 against their 0.8) cost the 10 cm
+        climb (``tests/test_climb.py``): the recursive planner ran out of time; both at
+        0.7 it climbs.
     sway_stiffness : on three legs, Theta2's pose has at least this sway stiffness on the
         robot's servos, in units of m g / L (:mod:`planner.stiffness`; the feed-forward:
         the commanded torques); a pose below it is solved again with the stiffness as
