@@ -258,12 +258,17 @@ class TorqueCheck:
         f = self._least_squares_forces(jt, g)
         weight_n = float(np.linalg.norm(g[self.base_idx][:3]))
         for share in COMMANDED_FRICTION_SHARES:
-            if f is not None and self._inside_cones(f, n, share * mu, weight_n):
-                # inside these cones, inside every wider one too: the same forces for all
-                return self._feasibility(g, jt, sup, f, "Solved")
-            res = self._socp(g, jt, sup, n, share * mu, least_squares=True)
+            res = self._least_squares(g, jt, sup, n, share * mu, f, weight_n)
             if res.status in _SOLVED and res.ratio <= COMMANDED_TORQUE_FRACTION:
                 return res
+        return self._least_squares(g, jt, sup, n, mu, f, weight_n)
+
+    def _least_squares(self, g, jt, sup, n, mu: float, f, weight_n: float) -> TorqueFeasibility:
+        """The least-squares distribution in the cones of ``mu``.
+
+        The cone-free forces ``f`` (:meth:`_least_squares_forces`, None: singular) where
+        they lie inside, else the SOCP.
+        """
         if f is not None and self._inside_cones(f, n, mu, weight_n):
             return self._feasibility(g, jt, sup, f, "Solved")
         return self._socp(g, jt, sup, n, mu, least_squares=True)
