@@ -5,6 +5,7 @@ import pinocchio as pin
 import pytest
 
 import planner.local.base as base_module
+from planner.kinematics import kinematics_of
 from planner.local.base import OTHER_FOOTHOLDS
 from planner.local.gait_queue import CRAWL, GaitQueue
 from planner.local.soft import SoftPlanner
@@ -578,3 +579,96 @@ def test_a_step_asked_for_a_knee_branch_lands_on_it_or_fails(flat_planner, leg):
         assert kin.knee_direction(leg, other.end.joints_rad[leg]) == -own
     else:
         assert "knee branch" in other.diagnosis
+
+
+def _standing(planner, base_W, feet_xy, knees):
+    """A level four-foot State: body origin at ``base_W``, feet on the terrain at ``feet_xy``."""
+    from planner.state import State
+
+    robot, terrain = planner.robot, planner.terrain
+    feet = np.array([[x, y, float(terrain.height(x, y))] for x, y in feet_xy])
+    joints = []
+    for i, f in enumerate(feet):
+        centre = f + robot.foot_radius_m * np.asarray(terrain.normal(f), float).ravel()
+        ik = planner.kin.ik_leg(i, centre - base_W, knee=knees[i])
+        assert ik.reachable and not ik.knee_flipped
+        joints.append(ik.joints_rad)
+    return State(np.asarray(base_W, float), np.eye(3), feet, np.array(joints))
+
+
+def _exact_far_clearance_m(robot, state, leg, box_lo, box_hi):
+    """Least distance of ``leg``'s thigh and shank capsules, away from the foot, to the
+    ground plane z = 0 and an axis-aligned box (a barrier): points every 0.5 mm on the axes.
+    """
+    from planner.links import leg_links
+
+    links = leg_links(robot)
+    a, b = links.segments_W(
+        robot.q_from(state.base_position_W, state.base_quaternion_xyzw, state.joints_rad)
+    )
+    foot_B = kinematics_of(robot).foot_B(leg, state.joints_rad[leg])
+    foot = state.base_rotation_W @ foot_B + state.base_position_W
+    best = np.inf
+    for c, cap in enumerate(links.capsules):
+        if cap.leg != leg:
+            continue
+        n = int(np.ceil(np.linalg.norm(b[c] - a[c]) / 5e-4)) + 1
+        pts = a[c] + np.linspace(0.0, 1.0, n)[:, None] * (b[c] - a[c])
+        pts = pts[np.linalg.norm(pts - foot, axis=1) >= base_module.KNEE_CHOICE_FOOT_ZONE_M]
+        if not len(pts):
+            continue
+        centre, half = 0.5 * (box_lo + box_hi), 0.5 * (box_hi - box_lo)
+        to_box = np.linalg.norm(np.maximum(np.abs(pts - centre) - half, 0.0), axis=1)
+        best = min(best, float(np.min(np.minimum(to_box, pts[:, 2]))) - cap.radius_m)
+    return best
+
+
+def test_a_hind_foot_that_stops_the_body_passing_a_barrier_is_refused(littledog):
+    """``blocks_passage`` (recursive and hard planners; issue 15, barrier75mm at 0.7).
+
+    HR 4.6 cm before a 7.5 cm barrier with its knee ahead (LittleDog's hind knees): the
+    body a stride further on puts the shank into the barrier at every height the planner
+    tries (measured exactly against the box), and the rearward branch is out of the
+    joint limits: blocked. 10 cm back it clears (exactly, at every pose judged); on flat
+    ground there is no tall edge to judge. The greedy planner keeps its footholds.
+    """
+    from planner.local.recursive import RecursivePlanner
+
+    barrier = load_terrain("barrier75mm")  # x 0.80-0.83 m, 7.5 cm high
+    lo = np.array([barrier.spec["x"], -1.0, -1.0])
+    hi = np.array([barrier.spec["x"] + barrier.spec["thickness"], 1.0, barrier.spec["height"]])
+    rec = RecursivePlanner(littledog, barrier)
+    assert rec.foothold_passage and not SoftPlanner.foothold_passage
+    knees = [lg.knee_direction for lg in littledog.legs]
+    base = np.array([0.835, 0.0, 0.148])
+    feet = [(0.935, 0.07), (0.935, -0.07), (0.70, 0.07), (0.754, -0.069)]
+    near = _standing(rec, base, feet, knees)
+    assert knees[3] == 1 and rec.blocks_passage(near, 3)
+    back = _standing(rec, base, feet[:3] + [(0.70, -0.069)], knees)
+    assert not rec.blocks_passage(back, 3)
+
+    nominal = base_module.nominal_height_m(littledog)
+    for state, blocked in ((near, True), (back, False)):
+        th = state.joints_rad[3]
+        centre = kinematics_of(littledog).foot_B(3, th) + state.base_position_W
+        for strides in base_module.PASSAGE_STRIDES:
+            x = state.base_position_W[0] + strides * rec.stride_m()
+            exact = []
+            for dz in base_module.PASSAGE_RAISES_M:
+                moved = state.copy()
+                moved.base_position_W = np.array([x, 0.0, nominal + dz])
+                ik = rec.kin.ik_leg(3, centre - moved.base_position_W, reference_rad=th, knee=1)
+                if not ik.reachable or ik.knee_flipped:
+                    continue
+                moved.joints_rad[3] = ik.joints_rad
+                exact.append(_exact_far_clearance_m(littledog, moved, 3, lo, hi))
+            if blocked and strides == base_module.PASSAGE_STRIDES[-1]:
+                assert exact and max(exact) < base_module.PASSAGE_CLEARANCE_M
+            if not blocked:
+                assert exact and min(exact) >= base_module.PASSAGE_CLEARANCE_M
+        if blocked:  # and the rearward branch cannot stand there
+            other = rec.kin.ik_leg(3, centre - state.base_position_W, reference_rad=th, knee=-1)
+            assert not other.reachable or other.knee_flipped
+
+    flat = RecursivePlanner(littledog, load_terrain("flat"))
+    assert not flat.blocks_passage(_standing(flat, base, feet, knees), 3)

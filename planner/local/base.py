@@ -83,6 +83,10 @@ KNEE_CHOICE_GAIN_M = 0.01  # ... takes the other knee branch if it is this much 
 KNEE_CHOICE_EDGE_M = 0.06  # ... next to an edge this much higher than the foothold
 KNEE_CHOICE_LOOKAHEAD = 0.5  # fraction of a stride the body is moved ahead to judge it
 KNEE_CHOICE_FOOT_ZONE_M = 0.03  # (link points this near the foot centre do not count)
+# a landing next to a tall edge must let the body pass over the foot (foothold_passage):
+PASSAGE_STRIDES = (0.5, 1.0)  # the body this many strides further along ...
+PASSAGE_RAISES_M = (0.0, 0.01, 0.02)  # ... at its nominal height or this much higher ...
+PASSAGE_CLEARANCE_M = 0.005  # ... keeps the leg's links (away from the foot) this clear
 OTHER_FOOTHOLDS = 8  # footholds tried when the body cannot get ready for Lambda_t's
 FAILED_MOVES_KEPT = 4096  # failed body moves remembered in a run (LocalPlanner._body_move_once)
 CANDIDATE_POOL = 40  # candidates scored before the best and the shortest are picked
@@ -332,6 +336,9 @@ class LocalPlanner:
     # move (:meth:`next_leg_can_move`): the recursive planner's (8.5) look-ahead. Off for
     # the greedy planners: on barrier75mm it let soft take footholds that stalled later
     foothold_lookahead = False
+    # :meth:`swing` refuses landings next to a tall edge that stop the body passing over
+    # them (:meth:`blocks_passage`)
+    foothold_passage = False
 
     def __init__(self, robot, terrain, mu: float | None = None, settings=None):
         self.robot = robot
@@ -747,6 +754,101 @@ class LocalPlanner:
         target_W=None,
         knee: int | None = None,
     ):
+        """:meth:`_swing_once`, and with ``foothold_passage`` its landing judged.
+
+        A landing that stops the body passing over the foot (:meth:`blocks_passage`) fails
+        like a foothold out of reach: :meth:`step` tries the leg's other footholds.
+        """
+        sol, path = self._swing_once(state, leg, tau, step_m, target_W, knee)
+        if sol.feasible and self.foothold_passage and self.blocks_passage(sol.state, leg):
+            sol.feasible = False
+            sol.diagnosis = (
+                f"swing of {LEG_NAMES[leg]}: standing there, its links would meet the edge "
+                "ahead as the body passes over the foot"
+            )
+            return sol, []
+        return sol, path
+
+    def blocks_passage(self, touch: State, leg: int) -> bool:
+        """Whether ``leg``, landed as in ``touch`` next to a tall edge, stops the body passing.
+
+        Beyond the paper: a hind foot a few centimetres before a barrier, its knee pointing
+        ahead, lands clear, but the body cannot then move over it (the shank sweeps into
+        the barrier), and its other knee branch is out of its joint limits there: the walk
+        is stuck (barrier75mm, recursive, 0.7 torque fraction). The leg is judged on its
+        branch with the body ``PASSAGE_STRIDES`` of a stride further along, at its nominal
+        height over the ground or up to ``PASSAGE_RAISES_M`` higher: blocked where at some
+        such distance the leg reaches its foot and no height keeps its links (away from
+        the foot) ``PASSAGE_CLEARANCE_M`` clear. Only next to a tall edge (as
+        :meth:`_other_knee_landing`).
+        """
+        if not self._next_to_tall_edge(touch.feet_W[leg], leg):
+            return False
+        R = touch.base_rotation_W
+        th = touch.joints_rad[leg]
+        knee = self.kin.knee_direction(leg, th)
+        centre = R @ self.kin.foot_B(leg, th) + touch.base_position_W
+        ahead = R[:, 0].copy()
+        ahead[2] = 0.0
+        ahead /= max(float(np.linalg.norm(ahead)), 1e-9)
+        for strides in PASSAGE_STRIDES:
+            base = touch.base_position_W + ahead * strides * self.stride_m()
+            ground = float(self.terrain.height(*base[:2])) + nominal_height_m(self.robot)
+            reached = False
+            for dz in PASSAGE_RAISES_M:
+                moved = touch.copy()
+                moved.base_position_W = np.array([base[0], base[1], ground + dz])
+                got = self._far_link_clearance(moved, leg, centre, th, knee)
+                if got is None:
+                    continue
+                reached = True
+                if got[0] >= PASSAGE_CLEARANCE_M:
+                    break
+            else:
+                if reached:
+                    return True
+        return False
+
+    def _far_link_clearance(self, s: State, leg: int, centre_W, th, knee: int):
+        """(clearance [m], joints) of ``leg``'s links away from its foot, or None.
+
+        At body pose ``s`` with the foot centre at ``centre_W`` on knee branch ``knee``
+        (``th``: the IK's reference); None where the leg cannot reach it so. The least
+        clearance of the leg's link points farther than ``KNEE_CHOICE_FOOT_ZONE_M`` from
+        the foot (near it the shank always comes close to the ground); inf if there are none.
+        """
+        R = s.base_rotation_W
+        ik = self.kin.ik_leg(leg, R.T @ (centre_W - s.base_position_W), reference_rad=th, knee=knee)
+        if not ik.reachable or ik.knee_flipped:
+            return None
+        links = leg_links(self.robot)
+        j = s.joints_rad.copy()
+        j[leg] = ik.joints_rad
+        q = self.robot.q_from(s.base_position_W, s.base_quaternion_xyzw, j)
+        gap, pts = links.point_clearances(self.terrain, q)
+        mine = np.array([links.capsules[c].leg == leg for c in links.owner])
+        far = mine & (np.linalg.norm(pts - centre_W, axis=1) >= KNEE_CHOICE_FOOT_ZONE_M)
+        return (float(gap[far].min()) if far.any() else np.inf), ik.joints_rad
+
+    def _next_to_tall_edge(self, foot_W, leg: int) -> bool:
+        """Terrain within half ``leg``'s reach ``KNEE_CHOICE_EDGE_M`` above ``foot_W``."""
+        foot = np.asarray(foot_W, float).reshape(3)
+        r = 0.5 * float(self.robot.reach_m[leg])
+        u = np.linspace(-r, r, 15)
+        X, Y = np.meshgrid(foot[0] + u, foot[1] + u)
+        near = np.hypot(X - foot[0], Y - foot[1]) <= r
+        H = np.asarray(self.terrain.height_sharp(X[near], Y[near]), float)
+        return float(H.max()) >= float(foot[2]) + KNEE_CHOICE_EDGE_M
+
+    def _swing_once(
+        self,
+        state: State,
+        leg: int,
+        tau: Trajectory,
+        step_m: float,
+        target_W=None,
+        knee: int | None = None,
+    ):
         """Theta3 for ``leg`` toward ``target_W`` (default Lambda_t); returns (solution, samples).
 
         A swing path that leaves the leg's reach is retried once with half the clearance.
@@ -870,8 +972,6 @@ class LocalPlanner:
             if not ik.reachable or ik.knee_flipped:
                 return None
             return _with_leg_joints(touch, leg, ik.joints_rad)
-        links = leg_links(self.robot)
-        mine = np.array([links.capsules[c].leg == leg for c in links.owner])
         R = touch.base_rotation_W
         th = touch.joints_rad[leg]
         centre = R @ self.kin.foot_B(leg, th) + touch.base_position_W
@@ -890,31 +990,16 @@ class LocalPlanner:
             """Least far clearance of the leg on branch ``knee`` at the three body poses."""
             out, joints = np.inf, None
             for s in (touch, moved, lowered):
-                ik = self.kin.ik_leg(
-                    leg, R.T @ (centre - s.base_position_W), reference_rad=th, knee=knee
-                )
-                if not ik.reachable or ik.knee_flipped:
+                got = self._far_link_clearance(s, leg, centre, th, knee)
+                if got is None:
                     if s is touch:
                         return -np.inf, None
                     continue  # out of reach there: the body will not go there
-                j = s.joints_rad.copy()
-                j[leg] = ik.joints_rad
-                joints = ik.joints_rad if joints is None else joints
-                q = self.robot.q_from(s.base_position_W, s.base_quaternion_xyzw, j)
-                gap, pts = links.point_clearances(self.terrain, q)
-                far = mine & (np.linalg.norm(pts - centre, axis=1) >= KNEE_CHOICE_FOOT_ZONE_M)
-                if far.any():
-                    out = min(out, float(gap[far].min()))
+                joints = got[1] if joints is None else joints
+                out = min(out, got[0])
             return out, joints
 
-        # only next to a tall edge: terrain within half the leg's reach this much higher
-        foot = touch.feet_W[leg]
-        r = 0.5 * float(self.robot.reach_m[leg])
-        u = np.linspace(-r, r, 15)
-        X, Y = np.meshgrid(foot[0] + u, foot[1] + u)
-        near = np.hypot(X - foot[0], Y - foot[1]) <= r
-        H = np.asarray(self.terrain.height_sharp(X[near], Y[near]), float)
-        if float(H.max()) < float(foot[2]) + KNEE_CHOICE_EDGE_M:
+        if not self._next_to_tall_edge(touch.feet_W[leg], leg):
             return None
         own = self.kin.knee_direction(leg, th)
         have, _ = clearance(own)

@@ -78,6 +78,7 @@ class HardPlanner(SoftPlanner):
 
     name = "hard"
     fixed_sequence = True
+    foothold_passage = True
 
     def __init__(self, robot, terrain, mu: float | None = None, settings=None):
         super().__init__(robot, terrain, mu, settings)

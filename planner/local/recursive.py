@@ -82,6 +82,7 @@ class RecursivePlanner(LocalPlanner):
 
     name = "recursive"
     foothold_lookahead = True
+    foothold_passage = True
 
     def __init__(self, robot, terrain, mu=None, settings=None, recursion=None):
         super().__init__(robot, terrain, mu, settings)
