@@ -26,7 +26,10 @@ diagonal edge at best on flat ground, and MuJoCo tips over below about 20 mm,
 :mod:`planner.stability`); and its height is free within ``HEIGHT_BAND_M`` of the target's
 (Theta1's ``height_band_m``: pinned in 3-D, the COM stood 7 mm too high for a leg's reach
 on slope10). Lambda is still searched along tau, and the footholds, body paths (rolled
-feet, via poses) and swings are the soft planner's.
+feet, via poses) and swings are the soft planner's, with the recursive planner's refusal
+of landings the body cannot pass over next to a tall edge
+(:meth:`~planner.local.base.LocalPlanner.blocks_passage`; without it hard stopped 130 cm
+short at barrier75mm).
 """
 
 from __future__ import annotations

@@ -27,7 +27,10 @@ cannot be made, go back as far as needed and try the earlier steps differently. 
   other three (:meth:`planner.local.base.LocalPlanner.legs_can_move`, a plain Theta2): a
   sequence ending in a *dead end* is traced back like a failed step (``stats.dead_ends``
   counts the windows refused). Each step already looks one leg ahead when it picks its
-  foothold (:meth:`~planner.local.base.LocalPlanner.next_leg_can_move`). Asking it of
+  foothold (:meth:`~planner.local.base.LocalPlanner.next_leg_can_move`), and next to a
+  tall edge refuses a landing the body could not pass over
+  (:meth:`~planner.local.base.LocalPlanner.blocks_passage`: barrier75mm's hind foot 4.6 cm
+  before the barrier, knee ahead, stopped the walk 133 cm short). Asking it of
   every leg (``check_all_legs``) refused sound windows: stairs with every leg checked
   traced back 15 windows of 15 and stopped by its 240 s budget 0.6 m short; with the
   next leg it reaches in 29 s, and up step10cm in 39 s instead of 110 s.
