@@ -30,10 +30,11 @@ from planner.walk import plan_walk
 @pytest.fixture(scope="module")
 def step_up():
     # a budget never reached: the test is about the plan, not the machine's speed. The goal
-    # 50 cm past the riser, all four feet on top (to 2.2 m the flat top added 100 s of
-    # planning to the suite: 326 s against 224 s, 37 steps and 5 retraces, at 230d21b)
+    # 30 cm past the riser, all four feet on top (to 2.2 m the flat top added 100 s of
+    # planning to the suite: 326 s against 224 s, 37 steps and 5 retraces, at 230d21b; to
+    # 1.3 m with the 0.7 torque fraction: 437 s, 4 retraces, against 155 s and 2 to 1.1 m)
     settings = LocalSettings(time_budget_s=600.0)
-    return plan_walk("littledog", "step10cm", (1.3, 0.0), (0.2, 0.0), "soft", settings=settings)
+    return plan_walk("littledog", "step10cm", (1.1, 0.0), (0.2, 0.0), "soft", settings=settings)
 
 
 def test_soft_traces_back_out_of_a_dead_end(step_up):
