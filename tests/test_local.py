@@ -629,8 +629,9 @@ def test_a_hind_foot_that_stops_the_body_passing_a_barrier_is_refused(littledog)
     HR 4.6 cm before a 7.5 cm barrier with its knee ahead (LittleDog's hind knees): the
     body a stride further on puts the shank into the barrier at every height the planner
     tries (measured exactly against the box), and the rearward branch is out of the
-    joint limits: blocked. 10 cm back it clears (exactly, at every pose judged); on flat
-    ground there is no tall edge to judge. The greedy planner keeps its footholds.
+    joint limits: blocked. 10 cm before the barrier it clears (exactly, at every pose
+    judged); on flat ground there is no tall edge to judge. The greedy planner keeps its
+    footholds.
     """
     from planner.local.recursive import RecursivePlanner
 

@@ -336,7 +336,7 @@ class LocalPlanner:
     # move (:meth:`next_leg_can_move`): the recursive planner's (8.5) look-ahead. Off for
     # the greedy planners: on barrier75mm it let soft take footholds that stalled later
     foothold_lookahead = False
-    # :meth:`swing` refuses landings next to a tall edge that stop the body passing over
+    # :meth:`step` refuses landings next to a tall edge that stop the body passing over
     # them (:meth:`blocks_passage`)
     foothold_passage = False
 
@@ -745,30 +745,6 @@ class LocalPlanner:
         second = interpolate_leaf(self.robot, self.terrain, first[-1], end2, n)
         return first + second[1:]
 
-    def swing(
-        self,
-        state: State,
-        leg: int,
-        tau: Trajectory,
-        step_m: float,
-        target_W=None,
-        knee: int | None = None,
-    ):
-        """:meth:`_swing_once`, and with ``foothold_passage`` its landing judged.
-
-        A landing that stops the body passing over the foot (:meth:`blocks_passage`) fails
-        like a foothold out of reach: :meth:`step` tries the leg's other footholds.
-        """
-        sol, path = self._swing_once(state, leg, tau, step_m, target_W, knee)
-        if sol.feasible and self.foothold_passage and self.blocks_passage(sol.state, leg):
-            sol.feasible = False
-            sol.diagnosis = (
-                f"swing of {LEG_NAMES[leg]}: standing there, its links would meet the edge "
-                "ahead as the body passes over the foot"
-            )
-            return sol, []
-        return sol, path
-
     def blocks_passage(self, touch: State, leg: int) -> bool:
         """Whether ``leg``, landed as in ``touch`` next to a tall edge, stops the body passing.
 
@@ -840,7 +816,7 @@ class LocalPlanner:
         H = np.asarray(self.terrain.height_sharp(X[near], Y[near]), float)
         return float(H.max()) >= float(foot[2]) + KNEE_CHOICE_EDGE_M
 
-    def _swing_once(
+    def swing(
         self,
         state: State,
         leg: int,
@@ -1421,6 +1397,13 @@ class LocalPlanner:
                 sol3, swing_path = self.swing(
                     sol2.state, leg, tau, step_m, target, knee if k == 0 else None
                 )
+                if sol3.feasible and self.foothold_passage and self.blocks_passage(sol3.state, leg):
+                    # a landing the body cannot pass over fails like one out of reach
+                    sol3.feasible = False
+                    sol3.diagnosis = (
+                        f"swing of {LEG_NAMES[leg]}: standing there, its links would meet "
+                        "the edge ahead as the body passes over the foot"
+                    )
                 if sol3.feasible:
                     made = Step(leg, True, state, sol2.state, sol3.state, body_path, swing_path)
                     if (
