@@ -82,7 +82,7 @@ DEFAULTS: dict[str, Any] = {
     "seed": 0,
     "time_budget_s": 60.0,
 }
-PLANNER_NAMES = ("soft", "hard", "recursive", "global")  # global: section 9 over soft
+PLANNER_NAMES = ("soft", "hard", "recursive", "greedy", "global")  # global: 9 over soft
 RESULTS_NAME = "results.jsonl"
 
 
@@ -301,6 +301,8 @@ def run_job(job: dict, keep_plan: bool = False) -> dict:
         if "backtracks" in plan.stats:  # the recursive planner's tracing back (8.5)
             rec["backtracks"] = int(plan.stats["backtracks"])
             rec["retraces"] = int(plan.stats.get("window_retraces", 0))
+        elif "retraces" in plan.stats:  # the soft planner's (none for greedy)
+            rec["retraces"] = int(plan.stats["retraces"])
         if keep_plan:
             rec["plan"] = plan.to_dict()
     except Exception as exc:  # one failing job must not stop the others

@@ -33,7 +33,6 @@ Theta3
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import sys
@@ -56,7 +55,6 @@ __all__ = [
     "Instance",
     "ProblemCache",
     "SolveRecord",
-    "add_bench_parser",
     "cmd_bench",
     "make_instances",
     "run_theta_bench",
@@ -868,41 +866,6 @@ def _target_text(v: dict[str, Any]) -> str:
 
 
 # ---- command line --------------------------------------------------------------------------
-
-
-def add_bench_parser(subparsers) -> argparse.ArgumentParser:
-    """Add ``bench theta [--n N] [--out DIR] [--seed S] [--terrains a,b] [--slsqp-n M]``."""
-    bench = subparsers.add_parser(
-        "bench",
-        help="benchmarks (theta: IPOPT vs SLSQP; courses: walks; physics: MuJoCo runs; "
-        "speed; robots)",
-    )
-    sub = bench.add_subparsers(dest="bench_target", required=True)
-    t = sub.add_parser("theta", help="Theta1-4: IPOPT vs SLSQP with finite differences")
-    t.add_argument("--n", type=int, default=200, help="instances per Theta and terrain")
-    t.add_argument("--out", default="bench/results", help="output folder")
-    t.add_argument("--seed", type=int, default=0)
-    t.add_argument("--terrains", default="flat,rough2cm", help="comma-separated names")
-    t.add_argument(
-        "--slsqp-n", type=int, default=None, help="SLSQP on a seeded subset of this size"
-    )
-    t.add_argument(
-        "--jit", action="store_true", help="also solve with the NLPs compiled to C (cached)"
-    )
-    t.set_defaults(func=cmd_bench)
-    from planner.bench_courses import add_courses_parser
-
-    add_courses_parser(sub)
-    from planner.bench_physics import add_physics_parser
-
-    add_physics_parser(sub)
-    from planner.bench_speed import add_speed_parser
-
-    add_speed_parser(sub)
-    from planner.bench_robots import add_robots_parser
-
-    add_robots_parser(sub)
-    return bench
 
 
 def cmd_bench(args) -> int:

@@ -23,7 +23,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from planner.batch import DEFAULTS, job_id, run_batch
+from planner.batch import DEFAULTS, PLANNER_NAMES, job_id, run_batch
 from planner.outputs import write_atomic
 
 __all__ = [
@@ -233,9 +233,9 @@ def _f(v, fmt: str) -> str:
 
 
 def _backtracks(row: dict) -> str:
-    """'backtracks / retraces' of a recursive plan's row, '-' for the other planners."""
+    """'backtracks / retraces' of a row: recursive's both, soft's retraces alone ('- / n')."""
     if row.get("backtracks") is None:
-        return "-"
+        return "-" if row.get("retraces") is None else f"- / {row['retraces']}"
     return f"{row['backtracks']} / {row.get('retraces', 0)}"
 
 
@@ -265,7 +265,9 @@ def render_markdown(result: dict[str, Any]) -> str:
         "ratio = planning time / time the walk takes to execute; job = wall time of the whole "
         "job (loading, planning, `check`): compare planners by it, since `global` plans "
         "check their candidates inside their planning time. backtracks / retraces: steps the "
-        "recursive planner (8.5) undid inside a window / committed windows it planned again.",
+        "recursive planner (8.5) undid inside a window / committed windows it planned again; "
+        "for soft, its retraces (dead ends traced back a crawl cycle or more, 8.5's "
+        "tracing back inside 8.2); greedy is 8.2 as the paper has it, without them.",
         "",
         "| robot | course | planner | reached | validated | steps | planning [s] | job [s] "
         "| walk [s] | ratio | left [m] | backtracks / retraces | note |",
@@ -341,9 +343,9 @@ def cmd_courses(args) -> int:
         return out
 
     planners = names(args.planners, "planners")
-    bad = [p for p in planners if p not in ("soft", "hard", "recursive", "global")]
+    bad = [p for p in planners if p not in PLANNER_NAMES]
     if bad:
-        raise InputError(f"--planners: unknown '{bad[0]}'; use soft, hard, recursive, global")
+        raise InputError(f"--planners: unknown '{bad[0]}'; use {', '.join(PLANNER_NAMES)}")
     if not args.time_budget > 0:
         raise InputError(f"--time-budget: must be > 0 s, got {args.time_budget}")
     from planner.interrupts import Interrupts

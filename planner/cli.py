@@ -285,9 +285,61 @@ def _cmd_demo(args) -> int:
     return rc
 
 
+def _add_simulate_parser(subparsers) -> argparse.ArgumentParser:
+    """Add ``simulate plan.json [--feedback|--correct] [--time-scale S] [--out sim.json]``."""
+    from planner.outputs import ROBOT_HELP
+
+    p = subparsers.add_parser(
+        "simulate", help="execute a plan in MuJoCo (open loop, feedback 8.3, correction 8.4)"
+    )
+    p.add_argument("plan", help="plan.json written by `stratawalk plan`")
+    mode = p.add_mutually_exclusive_group()
+    mode.add_argument(
+        "--feedback", action="store_true", help="re-plan each step from the measured state (8.3)"
+    )
+    mode.add_argument(
+        "--correct",
+        action="store_true",
+        help="execute the plan, correcting each step from the measured state (8.4)",
+    )
+    p.add_argument(
+        "--time-scale", type=float, default=1.0, help="simulated s per plan s (default 1)"
+    )
+    p.add_argument(
+        "--no-feedforward",
+        action="store_true",
+        help="servos track the joint set-points only (no holding-torque feed-forward)",
+    )
+    p.add_argument("--timestep", type=float, default=0.001, help="physics step [s]")
+    p.add_argument("--noise-mm", type=float, default=0.0, help="position noise sigma [mm]")
+    p.add_argument("--noise-deg", type=float, default=0.0, help="angle noise sigma [deg]")
+    p.add_argument("--latency", type=float, default=0.0, help="measurement latency [s]")
+    p.add_argument("--seed", type=int, default=0, help="noise seed")
+    p.add_argument(
+        "--plan-steps-first",
+        action="store_true",
+        help="with --feedback: each step is first the plan's own, corrected (8.4)",
+    )
+    p.add_argument("--out", help="write the executed motion here (stratawalk.plan/1)")
+    p.add_argument(
+        "--trajectory",
+        help="execute this `stratawalk export` file (CSV or npz) of the plan, open loop",
+    )
+    p.add_argument("--robot", metavar="URDF", help=ROBOT_HELP)
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_simulate)
+    return p
+
+
+def _cmd_simulate(args) -> int:
+    from planner.execution import cmd_simulate
+
+    return cmd_simulate(args)
+
+
 def _add_export_parser(subparsers):
     """Add ``export plan.json --rate HZ --out FILE.csv|FILE.npz``."""
-    from planner.plan import ROBOT_HELP
+    from planner.outputs import ROBOT_HELP
 
     p = subparsers.add_parser(
         "export", help="a plan as a fixed-rate trajectory (CSV or npz) for a controller"
@@ -354,8 +406,9 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument(
         "--planner",
         default="soft",
-        choices=["soft", "hard", "recursive"],
-        help="soft: 8.2 gait queue (default); hard: 8.1 search Omega; recursive: 8.5",
+        choices=["soft", "hard", "recursive", "greedy"],
+        help="soft: 8.2 gait queue, tracing back at dead ends (default); hard: 8.1 search "
+        "Omega; recursive: 8.5; greedy: 8.2 as the paper has it, no tracing back",
     )
     from planner.settings import SETTINGS
 
@@ -392,7 +445,7 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--terms", type=int, default=3, help="sine terms of --global's tau")
     pl.add_argument("--generations", type=int, default=8, help="CMA-ES generations (--global)")
     pl.set_defaults(func=_cmd_plan)
-    from planner.plan import ROBOT_HELP
+    from planner.outputs import ROBOT_HELP
 
     c = sub.add_parser("check", help="validate a plan independently (exit 1 on any violation)")
     c.add_argument("plan", help="plan.json written by `stratawalk plan`")
@@ -403,7 +456,7 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--terrain", default="rough2cm")
     d.add_argument("--out", default="out/demo")
     d.set_defaults(func=_cmd_demo)
-    from planner.bench import add_bench_parser
+    from planner.bench_cli import add_bench_parser
 
     add_bench_parser(sub)
     from planner.replay import add_replay_parser
@@ -412,9 +465,7 @@ def build_parser() -> argparse.ArgumentParser:
     from planner.plots import add_plot_parser
 
     add_plot_parser(sub)
-    from planner.execution import add_simulate_parser
-
-    add_simulate_parser(sub)
+    _add_simulate_parser(sub)
     from planner.batch import add_batch_parser
 
     add_batch_parser(sub)

@@ -64,7 +64,6 @@ __all__ = [
     "run_feedback",
     "shift_body",
     "simulate_plan",
-    "add_simulate_parser",
     "cmd_simulate",
 ]
 
@@ -923,52 +922,6 @@ def simulate_plan(
 
 
 # ------------------------------------------------------------------------------ command line
-def add_simulate_parser(subparsers) -> Any:
-    """Add ``simulate plan.json [--feedback|--correct] [--time-scale S] [--out sim.json]``."""
-    from planner.plan import ROBOT_HELP
-
-    p = subparsers.add_parser(
-        "simulate", help="execute a plan in MuJoCo (open loop, feedback 8.3, correction 8.4)"
-    )
-    p.add_argument("plan", help="plan.json written by `stratawalk plan`")
-    mode = p.add_mutually_exclusive_group()
-    mode.add_argument(
-        "--feedback", action="store_true", help="re-plan each step from the measured state (8.3)"
-    )
-    mode.add_argument(
-        "--correct",
-        action="store_true",
-        help="execute the plan, correcting each step from the measured state (8.4)",
-    )
-    p.add_argument(
-        "--time-scale", type=float, default=1.0, help="simulated s per plan s (default 1)"
-    )
-    p.add_argument(
-        "--no-feedforward",
-        action="store_true",
-        help="servos track the joint set-points only (no holding-torque feed-forward)",
-    )
-    p.add_argument("--timestep", type=float, default=0.001, help="physics step [s]")
-    p.add_argument("--noise-mm", type=float, default=0.0, help="position noise sigma [mm]")
-    p.add_argument("--noise-deg", type=float, default=0.0, help="angle noise sigma [deg]")
-    p.add_argument("--latency", type=float, default=0.0, help="measurement latency [s]")
-    p.add_argument("--seed", type=int, default=0, help="noise seed")
-    p.add_argument(
-        "--plan-steps-first",
-        action="store_true",
-        help="with --feedback: each step is first the plan's own, corrected (8.4)",
-    )
-    p.add_argument("--out", help="write the executed motion here (stratawalk.plan/1)")
-    p.add_argument(
-        "--trajectory",
-        help="execute this `stratawalk export` file (CSV or npz) of the plan, open loop",
-    )
-    p.add_argument("--robot", metavar="URDF", help=ROBOT_HELP)
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.set_defaults(func=cmd_simulate)
-    return p
-
-
 def cmd_simulate(args) -> int:
     """Run ``stratawalk simulate``; exit 0 when the run is OK, 1 otherwise.
 

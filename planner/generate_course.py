@@ -19,7 +19,6 @@ from planner.course_gen import (
     generate_course,
     write_course,
 )
-from planner.terrain import load_terrain
 
 
 def add_generate_parser(subparsers) -> argparse.ArgumentParser:
@@ -51,6 +50,8 @@ def cmd_generate(args) -> int:
     else:
         kinds = _check_kinds(k for k in args.kinds.split(",") if k.strip())
         spec = generate_course(args.seed, args.length, args.difficulty, kinds)
+    from planner.terrain import load_terrain  # CasADi: only when the command runs
+
     path = write_course(spec, args.out)
     terrain = load_terrain(path)
     kinds = [s["kind"] for s in terrain.spec["segments"][1:-1]]

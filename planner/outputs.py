@@ -16,7 +16,10 @@ from pathlib import Path
 
 from planner.errors import InputError
 
-__all__ = ["check_file", "check_folder", "write_atomic"]
+__all__ = ["ROBOT_HELP", "check_file", "check_folder", "write_atomic"]
+
+# help of the commands' --robot option, which reads a plan file whose robot has moved
+ROBOT_HELP = "URDF of the plan's robot, if the path the plan file names is gone (moved)"
 
 
 def _parents_are_folders(path: Path, option: str) -> None:

@@ -277,9 +277,6 @@ class Samples:
         }
 
 
-ROBOT_HELP = "URDF of the plan's robot, if the path the plan file names is gone (moved)"
-
-
 # ------------------------------------------------------------------------------ the plan
 @dataclass(eq=False)
 class Plan:

@@ -33,6 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from planner.errors import InputError
+from planner.legs import LEG_NAMES
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -55,7 +56,6 @@ __all__ = [
 ]
 
 _Array = NDArray[np.float64]
-LEG_NAMES = ("FL", "FR", "HL", "HR")  # planner.robot.LEG_NAMES, the paper's legs 1..4
 LEG_COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:red")  # FL, FR, HL, HR
 SWING_SHADE = "0.92"
 FIGURES = ("top_view", "stability", "joints", "gait")

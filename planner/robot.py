@@ -26,9 +26,9 @@ import pinocchio as pin
 
 from planner.errors import RobotModelError
 from planner.kinematics import finalize_robot
+from planner.legs import LEG_NAMES  # noqa: F401  (re-exported: planner.robot.LEG_NAMES)
 from planner.robot_model import Leg, Robot
 
-LEG_NAMES = ("FL", "FR", "HL", "HR")  # the paper's legs 1..4
 MODELS_DIR = Path(__file__).resolve().parents[1] / "models"
 # a foot without a collision sphere in the URDF (a mesh, or none) gets a sphere of this
 # share of its shank (knee to foot point): the sphere feet of littledog, go1, a1, b1,

@@ -32,9 +32,9 @@ from pathlib import Path
 from typing import Any
 
 from planner.errors import InputError
-from planner.local.base import LocalSettings
+from planner.legs import LEG_NAMES
 from planner.local.gait_queue import CRAWL
-from planner.robot import LEG_NAMES
+from planner.options import LocalSettings
 
 __all__ = [
     "PRESETS",

@@ -21,6 +21,8 @@ import casadi as ca
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from planner.margins import BALANCE_MARGIN_M, PATH_BALANCE_MARGIN_M
+
 __all__ = [
     "BALANCE_MARGIN_M",
     "PATH_BALANCE_MARGIN_M",
@@ -31,9 +33,6 @@ __all__ = [
     "tip_margin_m",
     "triangle_inradius_m",
 ]
-
-BALANCE_MARGIN_M = 0.025  # three-leg keyframes: COM this far inside the support triangle
-PATH_BALANCE_MARGIN_M = 0.020  # three-leg path samples (the swing leg's mass moves the COM)
 
 
 def support_margin_m(feet_W: ArrayLike, com_W: ArrayLike) -> float:

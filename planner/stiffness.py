@@ -52,6 +52,7 @@ from numpy.typing import NDArray
 
 from planner.kinematics import kinematics_of, robot_cached
 from planner.lie import hat_ca, rotation_from_vector_ca
+from planner.margins import SWAY_STIFFNESS_AIM_MG_PER_L, SWAY_STIFFNESS_MIN_MG_PER_L
 from planner.servo_model import servo_model
 
 if TYPE_CHECKING:
@@ -68,8 +69,6 @@ __all__ = [
 
 _Array = NDArray[np.float64]
 
-SWAY_STIFFNESS_MIN_MG_PER_L = 0.8  # least sway stiffness of a three-leg stance [m g / L]
-SWAY_STIFFNESS_AIM_MG_PER_L = 1.2  # ... and what Theta2 aims for where it can [m g / L]
 _NEWTON_STEPS = 2  # IK steps in the potential: error O(|xi|^4), exact Hessian at xi = 0
 
 

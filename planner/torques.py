@@ -33,6 +33,7 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
+from planner.margins import COMMANDED_TORQUE_FRACTION
 from planner.statics import _csc, _tangent_bases, _zero_csc
 
 if TYPE_CHECKING:
@@ -51,18 +52,6 @@ __all__ = [
 
 _Array = NDArray[np.float64]
 _SOLVED = ("Solved", "AlmostSolved")
-# joint torque / URDF effort the servos may need to hold a planned stance, in the force
-# distribution the feed-forward commands (least sum of (torque / effort)^2): the least
-# achievable ratio relies on internal foot forces no servo produces (barrier75mm: 49 %
-# achievable, 102 % commanded, and the HL knee saturated and the body yawed 6 degrees).
-# Chosen from MuJoCo: a servo at this fraction saturates after (1 - f) effort / kp of
-# error (LittleDog's knee, 0.6 N m at 20 N m/rad: 0.34 degrees at 0.8, 0.52 at 0.7), and
-# on three legs the servos' loads exceed the feed-forward by up to 0.3-0.4 of the effort
-# in healthy runs (internal forces of the stance: feet a millimetre off their set-points).
-# With 0.8 barrier9cm's plan fell open loop and stalled with feedback (a front knee
-# saturated, the body sagged 2.4 cm towards it within one swing, the diagonal hind foot
-# landed 13 mm above the ground); with 0.7 both barriers' new plans reach both ways
-COMMANDED_TORQUE_FRACTION = 0.7
 # shares of the friction coefficient the commanded (feed-forward) distribution may use, the
 # smallest first whose forces load no joint beyond COMMANDED_TORQUE_FRACTION (else the whole
 # cone): the least-squares forces lean along the legs, so on an incline they sat on the

@@ -44,6 +44,19 @@ def test_console_script_entry_point():
     assert "go1" in out and "RL_calf_joint" in out
 
 
+def test_the_help_loads_no_solver_nor_robot_library():
+    """Issue 16: `stratawalk --help` and every sub-command's parser start without CasADi,
+    Pinocchio, MuJoCo or SciPy (each sub-command imports what it runs)."""
+    code = (
+        "import sys; from planner.cli import build_parser; build_parser(); "
+        "print(' '.join(m for m in ('casadi', 'pinocchio', 'mujoco', 'scipy') "
+        "if m in sys.modules))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == ""
+
+
 def test_plan_then_check_from_the_command_line(tmp_path, capsys):
     out = tmp_path / "plan.json"
     rc = main(["plan", "--terrain", "flat", "--goal", "0.45,0", "--out", str(out)])

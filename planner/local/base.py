@@ -52,7 +52,8 @@ from planner.leg_swing import joint_space_swing
 from planner.lie import rotation_from_quat
 from planner.links import leg_links
 from planner.local.gait_queue import CRAWL
-from planner.problems import Theta1, Theta2, Theta3, Theta4, ThetaOptions
+from planner.options import LocalSettings
+from planner.problems import Theta1, Theta2, Theta3, Theta4
 from planner.problems.base import ConstraintCheck
 from planner.robot import LEG_NAMES
 from planner.rolling import end_keyframe
@@ -116,76 +117,6 @@ LEVEL_WIDTH_M = 0.03  # the swing track's half width [m]
 LEVEL_GRID_M = 0.01  # spacing of the heights sampled [m]
 MAX_START_TORQUE_FRACTION = 0.9  # ... but never past this (nor below zero clearance):
 # without the bounds, each path could lose a little more than the last (a ratchet)
-
-
-@dataclass
-class LocalSettings:
-    """What the local planner trades off.
-
-    step_m : stride of Lambda_t; default 0.35 x leg reach (6.3 cm for LittleDog).
-    shrink : Lambda_c's pull from the support centroid toward its incentre (stability
-        margin before a leg lifts); 0 is the paper.
-    body_speed_m_s, body_accel_m_s2, swing_time_s : the time law of the samples
-        (:mod:`planner.time_law`): the base's peak speed and acceleration in body moves,
-        the least duration of a swing. None: LittleDog's ``BODY_SPEED_M_S``,
-        ``BODY_ACCEL_M_S2``, ``SWING_TIME_S``, scaled to the robot by dynamic similarity
-        (speeds and times x sqrt(s), accelerations alike, :mod:`planner.robot_scale`).
-    swing_overlap : the largest share of a body move's duration that the next swing may
-        overlap (:mod:`planner.local.overlap`: the leg lifts once the rest of the move
-        holds on three legs); 0: the body rests during every swing (the paper's step).
-    goal_tol_m : distance of the COM (xy) to the goal that counts as arrived.
-    balance_margin_frac : least friction-cone margin (x m g) at every sample of a path.
-    max_fails_in_row : failed step attempts in a row after which the planner is stuck.
-    no_progress_cycles : cycles without the COM coming ``PROGRESS_M`` nearer the goal after
-        which the planner is stuck (steps in place before an obstacle, some failing).
-    follow_support : the body's height and tilt follow the plane of the footholds it will
-        stand on (issue 15 item 2); False: the paper's, over the terrain under the body.
-    com_target : where the body moves before a swing: "centroid", Lambda_c's (eq. 12, the
-        paper's, four body moves per crawl cycle) or "two_beat" (issue 16,
-        :func:`planner.heuristics.two_beat_xy_W`: into both the swing's and the next
-        swing's support, two body moves per cycle) where the ground under the feet is level
-        (:meth:`LocalPlanner.level_under`), Lambda_c's elsewhere.
-    level_stride : the stride of Lambda_t where the ground a swing crosses is level
-        (:meth:`LocalPlanner.stride_at`), as a fraction of the shortest leg reach; used
-        where longer than ``step_m``. None: ``step_m`` everywhere.
-    level_body_accel_m_s2, level_clearance_m, level_body_samples, level_swing_samples :
-        the body moves' acceleration bound and samples where the ground under the feet is
-        level, the swing height and samples where the ground under the swing's track is
-        (None: ``body_accel_m_s2``, ``clearance_m``, ``body_samples``, ``swing_samples``). The
-        fast preset walks fast on level ground and as carefully as the defaults elsewhere:
-        its 1.5 m/s^2 and 2 cm everywhere planned 12 of the 17 named and hard courses
-        (the defaults 16) and stairs_down fell with feedback; with those over level
-        ground only but 16 and 24 samples everywhere, 9 of 17 (incline18 stalled).
-    body_samples, swing_samples : samples of a body move's leaf and of a swing path. The
-        time law is exact at the samples only (each interval at constant acceleration):
-        long moves and swings run faster, and overlap more, with more of them.
-    """
-
-    gait: tuple[int, ...] = CRAWL
-    step_m: float | None = None
-    shrink: float = 0.3
-    clearance_m: float | None = None
-    body_samples: int = 8
-    swing_samples: int = 12
-    body_speed_m_s: float | None = None
-    body_accel_m_s2: float | None = None
-    swing_time_s: float | None = None
-    swing_overlap: float = 1.0
-    goal_tol_m: float = 0.05
-    max_cycles: int = 400
-    time_budget_s: float = 120.0
-    min_step_fraction: float = 0.25
-    max_fails_in_row: int = 8
-    no_progress_cycles: int = 32
-    balance_margin_frac: float = 0.01
-    follow_support: bool = True
-    com_target: str = "centroid"
-    level_stride: float | None = None
-    level_body_accel_m_s2: float | None = None
-    level_clearance_m: float | None = None
-    level_body_samples: int | None = None
-    level_swing_samples: int | None = None
-    theta: ThetaOptions = field(default_factory=ThetaOptions)
 
 
 @dataclass

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from collections import deque
 
-from planner.robot import LEG_NAMES
+from planner.legs import LEG_NAMES
 
 CRAWL = (2, 0, 3, 1)  # HL, FL, HR, FR: the quasi-static crawl (0-based legs)
 

@@ -60,6 +60,7 @@ class SoftPlanner(LocalPlanner):
 
     name = "soft"
     fixed_sequence = False  # True: a failed leg waits a whole cycle (8.1's sequence S)
+    retraces = RETRACES  # the tracing back at a dead end (empty: none, the paper's 8.2)
 
     def __init__(self, robot, terrain, mu=None, settings=None):
         super().__init__(robot, terrain, mu, settings)
@@ -81,9 +82,10 @@ class SoftPlanner(LocalPlanner):
             stalled = run.cycles - run.best_at >= st.no_progress_cycles // 2
             new_point = run.best_dist_m < retrace_dist - PROGRESS_M
             if (
-                (fails_in_row >= RETRACE_FAILS or stalled)
+                self.retraces
+                and (fails_in_row >= RETRACE_FAILS or stalled)
                 and history
-                and (new_point or level < len(RETRACES))
+                and (new_point or level < len(self.retraces))
             ):
                 # a dead end: back to RETRACE_STEPS steps before the best point, and plan
                 # from there with the look-ahead and shorter strides (8.5's tracing back)
@@ -94,7 +96,7 @@ class SoftPlanner(LocalPlanner):
                     retrace_k = max(at_best - RETRACE_STEPS, 0)
                 else:  # the same dead end again: shorter strides, then farther back
                     level += 1
-                back = RETRACES[level - 1][0] * RETRACE_STEPS
+                back = self.retraces[level - 1][0] * RETRACE_STEPS
                 k = min(max(retrace_k - back, 0), len(history) - 1)
                 mark, legs, _ = history[k]
                 del history[k:]
@@ -106,7 +108,7 @@ class SoftPlanner(LocalPlanner):
                 run.best_at = run.cycles
                 self.extra_stats["retraces"] += 1
             self.foothold_lookahead = walk.steps < lookahead_until
-            ambition = RETRACES[level - 1][1] if self.foothold_lookahead else 1.0
+            ambition = self.retraces[level - 1][1] if self.foothold_lookahead else 1.0
             run.cycles += 1
             mark = walk.mark()
             before = tuple(queue)
@@ -133,4 +135,17 @@ class SoftPlanner(LocalPlanner):
         return nearest_walk.settle(walk, self.distance_to_goal(walk.state, run), message)
 
 
-__all__ = ["LocalPlan", "LocalSettings", "SoftPlanner"]
+class GreedyPlanner(SoftPlanner):
+    """Section 8.2 as the paper has it: greedy steps, no tracing back at a dead end.
+
+    The baseline that shows what tracing back (8.5) earns: where its greedy steps lead into
+    a stance no leg can step from, it swaps legs and shortens strides until
+    ``max_fails_in_row`` or ``no_progress_cycles`` stop it; the soft planner (its retraces)
+    and the recursive planner undo the steps that led there.
+    """
+
+    name = "greedy"
+    retraces = ()
+
+
+__all__ = ["GreedyPlanner", "LocalPlan", "LocalSettings", "SoftPlanner"]

@@ -35,10 +35,8 @@ import pinocchio as pin
 from planner import statics
 from planner.kinematics import kinematics_of
 from planner.lie import coords_from_pose, pose_from_coords, rotation_from_vector_ca
-from planner.stability import BALANCE_MARGIN_M
+from planner.options import ThetaOptions
 from planner.state import State
-from planner.stiffness import SWAY_STIFFNESS_AIM_MG_PER_L, SWAY_STIFFNESS_MIN_MG_PER_L
-from planner.torques import COMMANDED_TORQUE_FRACTION
 
 FEASIBILITY_TOL = 1e-6  # [m, rad, N]: an independent violation above this is infeasible
 CLEARANCE_ACTIVE_POINTS = 8  # points of P held besides its bottom corners (2 per quarter)
@@ -51,78 +49,6 @@ WITNESS_SLACK_M = 0.001
 # planner.leg_swing) nor correct a tracking error; a landing onto a 10 cm step put the hip
 # roll at its -0.6 rad stop, and no swing path reached it
 LANDING_LIMIT_MARGIN_RAD = 0.1
-
-
-@dataclass
-class ThetaOptions:
-    """Settings shared by the Theta problems; what each trades off.
-
-    weights : gamma_1..gamma_5 of Theta1, Theta2, Theta4 (section 7.3). gamma_1, gamma_2
-        are large because log sigma_1 = log cos(angle) is flat: with 50, a 10 degree tilt
-        or yaw costs about as much as a 0.9 cm COM miss (gamma_4 = 2, com_length 1 cm);
-        with the paper's equal weights the COM term alone decided the posture and the
-        body rolled and yawed by 15 degrees to shift its COM. Raise gamma_4 to
-        follow the COM target more tightly; raise gamma_3 for stances nearer theta_nor.
-    clearance_m : delta_c, the least height of every vertex of the body box P above the
-        terrain (constraint b). Lower it when a step or barrier needs the belly closer.
-    forces : impose inequalities (d), (e) on the eq. 5 forces (the paper's default).
-    min_normal_force_frac : (d) asks F_i.n_i >= this fraction of m g (strictly positive).
-    balance_margin_m : on three legs, the COM at least this far (horizontally) inside every
-        edge of the support triangle (:mod:`planner.stability`: chosen from MuJoCo falls).
-    sigma_floor : lower bound of sigma1, sigma2, sigma5 (orientation stays forward and up).
-    torque_fraction : on three legs, Theta2's pose needs no support joint beyond this
-        fraction of its URDF effort in the force distribution the servos are commanded
-        (effort-weighted least squares inside the cones, :mod:`planner.torques`); the
-        planner's paths allow the same (``COMMANDED_TORQUE_FRACTION``). A pose beyond it is
-        solved again with the torque rows (:func:`planner.torques.least_squares_ratios_ca`).
-        None: off. Without it Theta2 chose three-leg stances whose hind knee needed 93-140 %
-        of its 0.6 N m on an 18 degree incline and an 8 cm step down, and the swing from
-        there failed. A margin below the paths' (0.75 against their 0.8) cost the 10 cm
-        climb (``tests/test_climb.py``): the recursive planner ran out of time; both at
-        0.7 it climbs.
-    sway_stiffness : on three legs, Theta2's pose has at least this sway stiffness on the
-        robot's servos, in units of m g / L (:mod:`planner.stiffness`; the feed-forward:
-        the commanded torques); a pose below it is solved again with the stiffness as
-        rows. None: off. Without it the two named and hard courses that fell in MuJoCo
-        open loop fell from the plan's softest three-leg stances (44-83 N/m).
-    sway_stiffness_aim : ... and a feasible pose below this is solved again with rows that
-        ask it, kept where they find one (None: not tried).
-    max_tilt_rad : Theta2's body z axis at most this far from u_n (sigma2 >= its cosine);
-        None: only ``sigma_floor``. The objective alone lets the body roll 17-29 degrees
-        where the constraints press (edges, a stretched leg), but a 20 degree bound made
-        Theta2 pick other poses and the stepdown8cm plan ended 15.2 cm from its planned
-        end in MuJoCo open loop (2.6 cm without): off by default.
-    whole_body_com : whole-body centre of mass (default) or the body link's (the paper).
-    max_iter, tol : IPOPT's iteration cap and tolerance. If a problem fails with
-        "Maximum_Iterations_Exceeded", raise max_iter or start nearer (warm start).
-        Feasibility does not rest on tol: constraints are held to 1e-9 by IPOPT and
-        checked independently to FEASIBILITY_TOL.
-    mu_init : IPOPT's first barrier parameter with the monotone strategy. The problems
-        are warm-started next to their optimum; IPOPT's default (adaptive, 0.1) pushed
-        the start off it and took 25 iterations, sometimes to another IK branch.
-    """
-
-    weights: tuple[float, float, float, float, float] = (50.0, 50.0, 1.0, 2.0, 0.5)
-    placement_weights: tuple[float, float, float] = (1.0, 1.0, 1.0)  # Theta3 gamma_1..3
-    clearance_m: float = 0.02
-    forces: bool = True
-    min_normal_force_frac: float = 0.02
-    balance_margin_m: float = BALANCE_MARGIN_M
-    sigma_floor: float = 0.05
-    max_tilt_rad: float | None = None
-    torque_fraction: float | None = COMMANDED_TORQUE_FRACTION
-    sway_stiffness: float | None = SWAY_STIFFNESS_MIN_MG_PER_L
-    sway_stiffness_aim: float | None = SWAY_STIFFNESS_AIM_MG_PER_L
-    whole_body_com: bool = True
-    friction_eps_N: float = 1e-3
-    max_iter: int = 150
-    tol: float = 1e-6
-    slope_limit: bool = True
-    com_length_m: float = 0.01  # sigma4 = exp(-|r_c - r_c*|^2 / (2 com_length_m^2))
-    target_length_m: float = 0.01  # Theta3 sigma1 = exp(-|r - r_t|^2 / (2 target_length_m^2))
-    joint_scale_rad: float = 1.0  # sigma3 = exp(-|theta - theta_nor|^2 / (2 joint_scale^2))
-    jit: bool = False  # NLP functions compiled to C, cached on disk (planner.problems.compiled)
-    mu_init: float | None = 1e-3  # None: IPOPT's adaptive strategy from 0.1
 
 
 @dataclass

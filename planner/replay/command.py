@@ -7,8 +7,7 @@ import math
 import time
 
 from planner.interrupts import Interrupts
-from planner.outputs import check_file
-from planner.plan import ROBOT_HELP
+from planner.outputs import ROBOT_HELP, check_file
 from planner.replay.page import write_html
 from planner.replay.scene import GEOMETRIES, build_scene
 from planner.replay.server import DEFAULT_HOST, ReplayServer, check_host
