@@ -33,7 +33,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from planner.contact import E_Z, foot_centre_from_contact
-from planner.kinematics import kinematics_of
+from planner.kinematics import IKResult, kinematics_of
 from planner.lie import interpolate_coords, pose_from_coords
 from planner.rolling import leg_rotations_W, roll_stance_feet
 from planner.state import State
@@ -307,6 +307,28 @@ def _leaf_stratum(state_a: State, state_b: State) -> int:
     raise ValueError(f"interpolate: states on different strata S{sa} and S{sb}, no common leaf")
 
 
+def kept_knee_branches(kin, results, reference_rad, base_position_W, base_rotation_W, centres_W):
+    """IK ``results`` of one sample with no leg jumping to its other knee branch.
+
+    A leg's result on the other branch than its ``reference_rad`` (``knee_flipped``: the
+    target lies beyond the joint limits of its own branch) would be a jump of the path
+    through the leg's straight pose: a stance leg measured at its knee stop (8.3, a
+    barrier75mm hard plan's FR at 57.0 of 57.3 degrees, its contact put 1 mm higher on the
+    terrain the planner sees) got the other branch at the path's first sample, and the
+    servos, asked to turn the standing knee by 145 degrees, dropped the robot. Such a leg
+    keeps its reference joints and is out of reach by its miss [m] (``reachable`` False).
+    """
+    p = np.asarray(base_position_W, float)
+    R = np.asarray(base_rotation_W, float)
+    ref = np.asarray(reference_rad, float).reshape(4, 3)
+    out = list(results)
+    for i, r in enumerate(results):
+        if r.knee_flipped:
+            miss = float(np.linalg.norm(R @ kin.foot_B(i, ref[i]) + p - np.asarray(centres_W[i])))
+            out[i] = IKResult(ref[i].copy(), False, miss, "kept", reason="the other knee branch")
+    return out
+
+
 def _interpolate(
     robot: Robot,
     terrain: _Terrain,
@@ -368,7 +390,11 @@ def _interpolate(
         else:
             results = kin.ik(p, R, centres[k], reference_rad=ref)
             rot_prev = leg_rotations_W(kin, R, np.array([r.joints_rad for r in results]))
-        joints = np.array([r.joints_rad for r in results])
+        kept = kept_knee_branches(kin, results, ref, p, R, centres[k])
+        joints = np.array([r.joints_rad for r in kept])
+        if any(r is not q for r, q in zip(kept, results, strict=True)):
+            rot_prev = leg_rotations_W(kin, R, joints)  # the rolling goes on from these
+        results = kept
         bad = [i for i, r in enumerate(results) if not r.reachable]
         end = state_a if k == 0 else state_b if k == n - 1 else None
         info = {} if end is None else dict(end.info)

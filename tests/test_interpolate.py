@@ -198,6 +198,41 @@ def test_unreachable_samples_are_marked_and_finite(littledog):
     assert all(np.all(np.isfinite(s.joints_rad)) for s in states)
 
 
+def test_a_leg_at_its_knee_stop_keeps_its_branch(littledog):
+    """A stance leg measured at its knee stop on its non-default branch (8.3: a hard plan's
+    FR at barrier75mm), its contact 1 mm higher than its joints put it: the path must not
+    jump to the other branch (which reaches exactly); the first sample keeps the measured
+    joints and is marked out of reach by the 1 mm, the body rising brings the foot back."""
+    kin = kinematics_of(littledog)
+    rho = littledog.foot_radius_m
+    terrain = DOUBLES["flat"]()
+    a = _stance(littledog, terrain, (0.0, 0.0))
+    fr = kin.legs[1]
+    th = np.array([0.0, np.radians(-41.5), fr.upper_rad[2] - 1e-4])  # knee at its stop
+    assert kin.knee_direction(1, th) == -fr.knee_direction  # the non-default branch
+    R = a.base_rotation_W
+    p = a.base_position_W.copy()
+    p[2] = rho - kin.foot_B(1, th)[2]  # FR's sphere resting on the ground
+    centres = kin.feet_W(p, R, littledog.theta_nor)
+    centres[1] = R @ kin.foot_B(1, th) + p
+    centres[:, 2] = rho
+    joints = np.array([r.joints_rad for r in kin.ik(p, R, centres)])
+    joints[1] = th
+    feet = centres - [0.0, 0.0, rho]
+    feet[1, 2] += 0.001  # the contact as the planner's terrain has it
+    start = State(p, R, feet, joints)
+    end = start.copy()
+    end.base_position_W = p + [0.0, 0.0, 0.005]
+    states = interpolate_leaf(littledog, terrain, start, end, 5)
+    assert [kin.knee_direction(1, s.joints_rad[1]) for s in states] == [-fr.knee_direction] * 5
+    assert not states[0].info["ik_ok"] and states[0].info["unreachable_legs"] == [1]
+    assert states[0].info["ik_error_m"] == pytest.approx(0.001, abs=2e-4)
+    np.testing.assert_array_equal(states[0].joints_rad[1], th)
+    assert all(s.info["ik_ok"] for s in states[1:])
+    steps = np.abs(np.diff([s.joints_rad[1] for s in states], axis=0))
+    assert steps.max() < np.radians(3.0)  # no jump between samples
+
+
 # ---- swing paths ------------------------------------------------------------------------------
 def test_swing_path_clears_a_step(source):
     terrain = _terrain("step", source)
