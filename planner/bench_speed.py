@@ -228,6 +228,24 @@ def _measure(
     return row
 
 
+def cli_start_s(repeats: int = 5, args=("--help",)) -> list[float]:
+    """Wall times [s] of ``stratawalk --help`` (``args``), each in a new interpreter.
+
+    What a user waits for before any work: Python, the command line's imports (issue 16:
+    no CasADi, Pinocchio, MuJoCo or SciPy for the parser).
+    """
+    import subprocess
+    import sys
+
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        subprocess.run([sys.executable, "-m", "planner.cli", *args], check=True,
+                       stdout=subprocess.DEVNULL)  # fmt: skip
+        times.append(time.perf_counter() - t0)
+    return times
+
+
 def run_speed_bench(
     courses=COURSES,
     goal_x: float = 2.2,
@@ -242,6 +260,7 @@ def run_speed_bench(
 
     machine = machine_info()
     t0 = time.perf_counter()
+    cli = cli_start_s(repeats)
     rows = [_measure(c, None, goal_x, repeats, True, p) for c in courses for p in presets]
     flats = [
         _measure(f"flat {m:g} m", m, START_XY[0] + m, repeats, False, presets[0])
@@ -254,6 +273,7 @@ def run_speed_bench(
                    "presets": list(presets)},
         "machine": machine,
         "total_time_s": time.perf_counter() - t0,
+        "cli_start_s": cli,
         "courses": rows,
         "flat": flats,
     }  # fmt: skip
@@ -290,6 +310,14 @@ def render_markdown(result: dict[str, Any]) -> str:
         "`stratawalk plan --preset fast` (two body moves per crawl cycle, long strides on "
         "level ground, 1.5 m/s^2, 2 cm swing height).",
         "",
+    ]
+    if result.get("cli_start_s"):
+        lines += [
+            f"`stratawalk --help` (the command line's start, a new interpreter each): median "
+            f"{statistics.median(result['cli_start_s']):.2f} s of {len(result['cli_start_s'])}.",
+            "",
+        ]
+    lines += [
         "| course | preset | reached, check | steps | planning [s] | per m [s] | total [s] "
         "| walk [s] "
         "| walk speed [cm/s] | planning / walk | "
