@@ -279,7 +279,6 @@ def test_soft_planner_retraces_a_dead_end_with_shorter_strides(littledog, monkey
     shorter strides (soft.RETRACES): a full HL stride that leaves FL no step is
     replaced by 0.6 of it. Planned again at full stride only (the rule before) it meets the
     same dead end."""
-    import planner.local.soft as soft_module
     from planner.local.base import LocalSettings
 
     terrain = load_terrain("flat")
@@ -288,14 +287,28 @@ def test_soft_planner_retraces_a_dead_end_with_shorter_strides(littledog, monkey
     plan = soft.plan([0.2, 0.0], [0.45, 0.0])
     assert plan.reached_goal, plan.message
     assert plan.stats["retraces"] >= 2
+    assert plan.stats["cycles"] <= 34  # the greedy planner's budget in the next test
     full = soft.stride_m()
     assert any(abs(s - 0.6 * full) < 1e-9 for s in strides[2])  # HL, traced back
     assert _max_sliding(littledog, terrain, plan.samples) < 1e-6
 
-    monkeypatch.setattr(soft_module, "RETRACES", ((0, 1.0), (0, 1.0), (0, 1.0)))
+    monkeypatch.setattr(SoftPlanner, "retraces", ((0, 1.0), (0, 1.0), (0, 1.0)))
     alike = SoftPlanner(littledog, terrain, settings=LocalSettings(max_cycles=40))
     _dead_end_rule(alike)
     assert not alike.plan([0.2, 0.0], [0.45, 0.0]).reached_goal
+
+
+def test_greedy_planner_stays_in_the_dead_end_soft_traces_back_from(littledog):
+    """The greedy planner (8.2 as the paper has it) never traces back: from the dead end
+    soft leaves by its retraces it only swaps legs and shortens strides, and stops short
+    within the 34 cycles soft reaches in (33, 2 retraces, at 1a47df2)."""
+    from planner.local.base import LocalSettings
+    from planner.local.soft import GreedyPlanner
+
+    greedy = GreedyPlanner(littledog, load_terrain("flat"), settings=LocalSettings(max_cycles=34))
+    _dead_end_rule(greedy)
+    plan = greedy.plan([0.2, 0.0], [0.45, 0.0])
+    assert not plan.reached_goal and plan.stats["retraces"] == 0
 
 
 def test_recursive_planner_traces_back_where_soft_gets_stuck(littledog):
