@@ -10,6 +10,7 @@ import sys
 import numpy as np
 
 from planner.errors import InputError, PlannerError, RobotModelError
+from planner.outputs import ROBOT_HELP
 
 
 def robot_summary(robot) -> str:
@@ -287,8 +288,6 @@ def _cmd_demo(args) -> int:
 
 def _add_simulate_parser(subparsers) -> argparse.ArgumentParser:
     """Add ``simulate plan.json [--feedback|--correct] [--time-scale S] [--out sim.json]``."""
-    from planner.outputs import ROBOT_HELP
-
     p = subparsers.add_parser(
         "simulate", help="execute a plan in MuJoCo (open loop, feedback 8.3, correction 8.4)"
     )
@@ -339,8 +338,6 @@ def _cmd_simulate(args) -> int:
 
 def _add_export_parser(subparsers):
     """Add ``export plan.json --rate HZ --out FILE.csv|FILE.npz``."""
-    from planner.outputs import ROBOT_HELP
-
     p = subparsers.add_parser(
         "export", help="a plan as a fixed-rate trajectory (CSV or npz) for a controller"
     )
@@ -445,8 +442,6 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--terms", type=int, default=3, help="sine terms of --global's tau")
     pl.add_argument("--generations", type=int, default=8, help="CMA-ES generations (--global)")
     pl.set_defaults(func=_cmd_plan)
-    from planner.outputs import ROBOT_HELP
-
     c = sub.add_parser("check", help="validate a plan independently (exit 1 on any violation)")
     c.add_argument("plan", help="plan.json written by `stratawalk plan`")
     c.add_argument("--robot", metavar="URDF", help=ROBOT_HELP)

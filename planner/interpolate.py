@@ -317,13 +317,14 @@ def kept_knee_branches(kin, results, reference_rad, base_position_W, base_rotati
     terrain the planner sees) got the other branch at the path's first sample, and the
     servos, asked to turn the standing knee by 145 degrees, dropped the robot. Such a leg
     keeps its reference joints and is out of reach by its miss [m] (``reachable`` False).
+    ``None`` results (legs not solved at this sample) stay None.
     """
     p = np.asarray(base_position_W, float)
     R = np.asarray(base_rotation_W, float)
     ref = np.asarray(reference_rad, float).reshape(4, 3)
     out = list(results)
     for i, r in enumerate(results):
-        if r.knee_flipped:
+        if r is not None and r.knee_flipped:
             miss = float(np.linalg.norm(R @ kin.foot_B(i, ref[i]) + p - np.asarray(centres_W[i])))
             out[i] = IKResult(ref[i].copy(), False, miss, "kept", reason="the other knee branch")
     return out

@@ -37,7 +37,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from planner.contact import unique_contact_points
-from planner.interpolate import swing_path
+from planner.interpolate import kept_knee_branches, swing_path
 from planner.lie import interpolate_coords, pose_from_coords
 from planner.rolling import leg_rotations_W, roll_stance_feet, sliding
 from planner.stability import BALANCE_MARGIN_M, support_margin_m
@@ -183,6 +183,7 @@ def _merged(
             c_B = (centres[leg] - p) @ R
             results = [None] * 4
             results[leg] = kin.ik_leg_near(leg, c_B, ref[leg])
+            results = kept_knee_branches(kin, results, ref, p, R, centres)
             joints = np.array(src.joints_rad, float)
             joints[leg] = results[leg].joints_rad
             feet = np.array(src.feet_W, float)
@@ -194,6 +195,7 @@ def _merged(
             _, contacts, results, _ = roll_stance_feet(
                 kin, terrain, p, R, centres, src.feet_W, rolled_from[j], stance, centres, ref
             )
+            results = kept_knee_branches(kin, results, ref, p, R, centres)  # as in a leaf path
             joints = np.array([r.joints_rad for r in results])
             feet = np.array(src.feet_W, float)
             feet[stance] = contacts
