@@ -434,3 +434,34 @@ def test_theta2_stiffens_a_three_leg_stance_when_asked(dog):
     sol = aiming.solve(start, rc, u_f, u_n)
     assert sol.feasible, sol.diagnosis
     assert stiffness(sol.state) >= sway.bound_n_per_m(want)
+
+
+def test_theta2_on_a_support_narrower_than_the_balance_margin_solves_nothing(dog, monkeypatch):
+    """HL's foot under the body, 3 cm right of the centre line: the triangle FR-HL-HR
+    has an inradius below the 25 mm balance margin, so no COM, hence no body pose, keeps
+    it. Theta2 says so without IPOPT; IPOPT, asked anyway, finds no pose either, and its
+    best keeps no more margin than the inradius."""
+    from planner.stability import support_margin_m, triangle_inradius_m
+
+    terrain, placed, u_f, u_n = _placed(dog, "flat", 0.3)
+    start, support = placed.state.copy(), (1, 2, 3)
+    start.feet_W = np.array(start.feet_W, float)
+    start.feet_W[2, 1] = -0.03 + placed.state.base_position_W[1]
+    room = triangle_inradius_m(start.feet_W[list(support)])
+    problem = Theta2(dog, terrain, support=support)
+    margin = problem.options.balance_margin_m
+    assert 0.0 < room < margin
+    rc = start.feet_W[list(support)].mean(axis=0) + 0.15 * u_n
+    solves = []
+    real = problem.solve_packed
+    monkeypatch.setattr(problem, "solve_packed", lambda *a: solves.append(a) or real(*a))
+    sol = problem.solve(start, rc, u_f, u_n)
+    assert not solves and not sol.feasible and sol.status == "support_too_small"
+    assert "'balance_margin'" in sol.diagnosis and "inradius" in sol.diagnosis
+    assert sol.violations["balance_margin"] >= margin - room - 1e-12
+    # the reference: IPOPT from the start
+    p = problem.params(start, rc, u_f, u_n)
+    ipopt = real(p, problem.initial_guess(start, p))
+    assert not ipopt.feasible
+    have = support_margin_m(ipopt.state.feet_W[list(support)], problem.check.com_W(ipopt.state))
+    assert have <= room + 1e-9

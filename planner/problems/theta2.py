@@ -449,6 +449,8 @@ class Theta2(ThetaProblem):
         ``hint`` (optional): a pose near the expected optimum, e.g. the precomputed plan's
         for this step (8.3-8.4), tried as the start when the others fail.
         """
+        if (room := self._support_room_m(start)) < self.options.balance_margin_m - FEASIBILITY_TOL:
+            return self._support_too_small(start, rc_star_W, u_f, u_n, swing_target_W, room)
         p = self.params(start, rc_star_W, u_f, u_n, swing_target_W)
         sol = self.solve_packed(p, self.initial_guess(start, p))
         if not sol.feasible:
@@ -478,7 +480,9 @@ class Theta2(ThetaProblem):
         ):
             # the torque rows cost 2-3x per solve and bind only where a stance is heavily
             # loaded (inclines, steps), the sway cuts only where it is soft: solved with
-            # them, from this pose, only then
+            # them, from this pose, only then. Also where the pose misses another constraint
+            # too: barrier9cm's recursive plan had 4 of its 17 such poses made feasible so,
+            # and without them ran out of its 600 s (31 steps; 293 s and reached with)
             sol = self._solve_sibling(sol, p)
         aim = self.options.sway_stiffness_aim
         if sol.feasible and aim is not None and self.options.sway_stiffness is not None:
@@ -491,6 +495,40 @@ class Theta2(ThetaProblem):
             # the other side of an edge and fail)
             land = self.x_block(sol.x, "theta_land").copy()
             sol.state.info["landing"] = (np.asarray(swing_target_W, float).copy(), land)
+        return sol
+
+    def _support_room_m(self, start: State) -> float:
+        """The largest balance margin [m] any body pose has on ``start``'s three support feet.
+
+        The inradius of their horizontal triangle (:func:`planner.stability.triangle_inradius_m`);
+        inf where Theta2 keeps no balance margin (four feet, no force rows, a pinned COM).
+        """
+        if len(self.support) != 3 or not self.options.forces:
+            return np.inf
+        if self.fix_com and self.height_band_m <= 0.0:
+            return np.inf
+        return stability.triangle_inradius_m(np.asarray(start.feet_W, float)[list(self.support)])
+
+    def _support_too_small(self, start, rc_star_W, u_f, u_n, swing_target_W, room_m):
+        """Theta2 where the support triangle is narrower than the balance margin: no solve.
+
+        Beyond the paper: the margin is a constraint on the COM's horizontal distance to
+        the triangle's edges, and no point is farther from them than the inradius, so no
+        body pose satisfies it. The start itself is returned, checked as :meth:`hold` does,
+        with the balance margin's shortfall at least the margin less the inradius. The
+        three solves from other starts and the torque or sway re-solves that IPOPT would
+        otherwise spend before "Infeasible_Problem_Detected" took 1-5 s a body move in
+        the greedy planner's dead end (tests/test_local.py: triangles of 10-13 mm inradius).
+        """
+        sol = self.hold(start, rc_star_W, u_f, u_n, swing_target_W)
+        short = self.options.balance_margin_m - room_m
+        sol.violations["balance_margin"] = max(sol.violations.get("balance_margin", 0.0), short)
+        sol.feasible, sol.status = False, "support_too_small"
+        said = self._diagnose(sol.status, sol.violations)
+        sol.diagnosis = said.replace("IPOPT status support_too_small", "no solve") + (
+            f" (the support triangle's inradius is {1000 * room_m:.1f} mm: no body pose "
+            f"keeps the {1000 * self.options.balance_margin_m:.0f} mm margin)"
+        )
         return sol
 
     def hold(self, start: State, rc_star_W, u_f, u_n, swing_target_W=None) -> ThetaSolution:
