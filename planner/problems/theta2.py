@@ -503,33 +503,48 @@ class Theta2(ThetaProblem):
         The inradius of their horizontal triangle (:func:`planner.stability.triangle_inradius_m`);
         inf where Theta2 keeps no balance margin (four feet, no force rows, a pinned COM).
         """
-        if len(self.support) != 3 or not self.options.forces:
-            return np.inf
-        if self.fix_com and self.height_band_m <= 0.0:
+        if not self._keeps_balance_margin():
             return np.inf
         return stability.triangle_inradius_m(np.asarray(start.feet_W, float)[list(self.support)])
+
+    def _keeps_balance_margin(self) -> bool:
+        """Whether the problem holds the COM ``balance_margin_m`` inside a support triangle."""
+        free = not self.fix_com or self.height_band_m > 0.0
+        return bool(self.options.forces and free and len(self.support) == 3)
 
     def _support_too_small(self, start, rc_star_W, u_f, u_n, swing_target_W, room_m):
         """Theta2 where the support triangle is narrower than the balance margin: no solve.
 
         Beyond the paper: the margin is a constraint on the COM's horizontal distance to
         the triangle's edges, and no point is farther from them than the inradius, so no
-        body pose satisfies it. The start itself is returned (as :meth:`hold` gives it),
-        with one violation: the balance margin short by the margin less the inradius. The
+        body pose satisfies it. The start itself is returned (:meth:`_at_start`, not
+        checked), with one violation: the balance margin short by the margin less the inradius. The
         three solves from other starts and the torque or sway re-solves that IPOPT would
         otherwise spend before "Infeasible_Problem_Detected" took 1-5 s a body move in
         the greedy planner's dead end (tests/test_local.py: triangles of 10-13 mm inradius).
         """
-        sol = self.hold(start, rc_star_W, u_f, u_n, swing_target_W)
-        # the one shortfall no pose removes (the start's own, e.g. its forces, are moot)
-        sol.violations = {"balance_margin": self.options.balance_margin_m - room_m}
-        sol.feasible, sol.status = False, "support_too_small"
-        said = self._diagnose(sol.status, sol.violations)
-        sol.diagnosis = said.replace("IPOPT status support_too_small", "no solve") + (
-            f" (the support triangle's inradius is {1000 * room_m:.1f} mm: no body pose "
-            f"keeps the {1000 * self.options.balance_margin_m:.0f} mm margin)"
+        x, p, state = self._at_start(start, rc_star_W, u_f, u_n, swing_target_W)
+        margin = self.options.balance_margin_m
+        return ThetaSolution(
+            problem=self.name,
+            status="support_too_small",
+            feasible=False,
+            state=state,
+            objective=self.objective_at(x, p),
+            objective_terms={},
+            iterations=0,
+            solve_time_s=0.0,
+            build_time_s=self.build_time_s,
+            diagnosis=(
+                f"{self.name}: no solve; violated: 'balance_margin' by {margin - room_m:.3g} m "
+                f"(the support triangle's inradius is {1000 * room_m:.1f} mm: no body pose "
+                f"keeps the {1000 * margin:.0f} mm margin)"
+            ),
+            # the one shortfall no pose removes (the start's own violations are moot)
+            violations={"balance_margin": margin - room_m},
+            x=x,
+            p=p,
         )
-        return sol
 
     def hold(self, start: State, rc_star_W, u_f, u_n, swing_target_W=None) -> ThetaSolution:
         """Theta2's constraints at ``start`` itself: the body stays where it stands.
@@ -543,21 +558,10 @@ class Theta2(ThetaProblem):
         landing-ready; the landing joints by IK of the swing target); ``feasible`` when
         they all hold. No IPOPT solve; the objective is the start's.
         """
-        p = self.params(start, rc_star_W, u_f, u_n, swing_target_W)
-        x = self.initial_guess(start, p)  # s1, s2, s5 and the landing joints
-        x[self._x_slices["p"]] = start.base_position_W
-        x[self._x_slices["phi"]] = coords_from_pose(
-            np.column_stack([start.base_rotation_W, start.base_position_W])
-        )[3:]
-        x[self._x_slices["theta"]] = np.asarray(start.joints_rad, float).ravel()
-        state = self._state_from_x(x, p)
+        x, p, state = self._at_start(start, rc_star_W, u_f, u_n, swing_target_W)
         violations = self._violations(state, x, p)
         worst = max(violations.values(), default=0.0)
         feasible = bool(np.isfinite(worst) and worst <= FEASIBILITY_TOL)
-        state.info["rc_star"] = np.asarray(rc_star_W, float)
-        if self.landing:
-            land = self.x_block(x, "theta_land").copy()
-            state.info["landing"] = (np.asarray(swing_target_W, float).copy(), land)
         return ThetaSolution(
             problem=self.name,
             status="held",
@@ -573,6 +577,26 @@ class Theta2(ThetaProblem):
             x=x,
             p=p,
         )
+
+    def _at_start(self, start: State, rc_star_W, u_f, u_n, swing_target_W=None):
+        """(x, p, state): the decision vector and pose of ``start`` itself, unchecked.
+
+        The start's body pose and joints; s1, s2, s5 and the landing joints as the
+        initial guess has them (the landing joints by IK of the swing target).
+        """
+        p = self.params(start, rc_star_W, u_f, u_n, swing_target_W)
+        x = self.initial_guess(start, p)  # s1, s2, s5 and the landing joints
+        x[self._x_slices["p"]] = start.base_position_W
+        x[self._x_slices["phi"]] = coords_from_pose(
+            np.column_stack([start.base_rotation_W, start.base_position_W])
+        )[3:]
+        x[self._x_slices["theta"]] = np.asarray(start.joints_rad, float).ravel()
+        state = self._state_from_x(x, p)
+        state.info["rc_star"] = np.asarray(rc_star_W, float)
+        if self.landing:
+            land = self.x_block(x, "theta_land").copy()
+            state.info["landing"] = (np.asarray(swing_target_W, float).copy(), land)
+        return x, p, state
 
     def _solve_sibling(
         self, sol: ThetaSolution, p: np.ndarray, aim: float | None = None
@@ -716,8 +740,7 @@ class Theta2(ThetaProblem):
             state.forces_W = forces
             if self.options.forces:
                 v["forces"] = max(viol, 0.0)
-        free = not self.fix_com or band > 0.0
-        if self.options.forces and free and len(self.support) == 3:
+        if self._keeps_balance_margin():
             have = stability.support_margin_m(state.feet_W[list(self.support)], ck.com_W(state))
             v["balance_margin"] = max(self.options.balance_margin_m - have, 0.0)
             res = None
