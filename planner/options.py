@@ -134,6 +134,9 @@ class LocalSettings:
     body_samples, swing_samples : samples of a body move's leaf and of a swing path. The
         time law is exact at the samples only (each interval at constant acceleration):
         long moves and swings run faster, and overlap more, with more of them.
+    overlap_worker : search each step's swing overlap in a forked second process while the
+        next step is planned (:mod:`planner.local.prefetch`); the plan is the same to the
+        bit either way, only the wall time differs.
     """
 
     gait: tuple[int, ...] = CRAWL
@@ -160,4 +163,5 @@ class LocalSettings:
     level_clearance_m: float | None = None
     level_body_samples: int | None = None
     level_swing_samples: int | None = None
+    overlap_worker: bool = True
     theta: ThetaOptions = field(default_factory=ThetaOptions)

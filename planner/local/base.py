@@ -171,60 +171,111 @@ class _Run:
 
 
 class Walk:
-    """Keyframes and timed dense samples of a walk being planned; can be rewound."""
+    """Keyframes and timed dense samples of a walk being planned; can be rewound.
 
-    def __init__(self, planner: LocalPlanner, state: State):
+    The steps are kept as recorded; their samples and times, which need each step's swing
+    overlap (:meth:`LocalPlanner.step_samples`), are put together when first asked for,
+    the overlaps searched meanwhile by ``worker`` where there is one
+    (:class:`planner.local.prefetch.OverlapWorker`).
+    """
+
+    def __init__(self, planner: LocalPlanner, state: State, worker=None):
         self.planner = planner
-        self.keyframes: list[State] = [state]
-        self.samples: list[State] = [state]
-        self.times: list[float] = [0.0]
+        self.start = state
+        self.parts: list[Step] = []  # the recorded steps (placements, failed ones, arrivals)
         self.steps = 0
+        self.worker = worker
+        self._timed: tuple | None = None  # (keyframes, samples, times) of ``parts``
 
     @property
     def state(self) -> State:
         """The current configuration (the last keyframe)."""
-        return self.keyframes[-1]
+        if not self.parts:
+            return self.start
+        last = self.parts[-1]
+        return last.end if last.ok else last.moved
+
+    @property
+    def n_keyframes(self) -> int:
+        """How many keyframes the walk has (without timing it)."""
+        return 1 + sum(3 if s.ok else 1 for s in self.parts)
 
     def add(self, step: Step) -> None:
         """Record a step: its body move (also of a failed placement) and its swing."""
-        p = self.planner
         if step.moved is None:
             return
-        states, t = p.step_samples(step)
-        t = self.times[-1] + t
-        n_body = max(len(step.body_path) - 1, 0)
-        if step.overlap is not None:  # the leg lifts at this body sample (local.overlap)
-            n_body = step.overlap.lift
-        p._append(self.samples, self.times, states[: 1 + n_body], t[1 : 1 + n_body])
-        self.keyframes.append(step.moved)
-        if step.ok:
-            p._append(self.samples, self.times, states[n_body:], t[1 + n_body :])
-            swing = step.swing_path if step.overlap is None else states[n_body:]
-            self.keyframes += [p._swing_keyframe(swing, step.leg, p.check), step.end]
-            self.steps += 1
+        self.parts.append(step)
+        self.steps += int(step.ok)
+        self._timed = None
+        if self.worker is not None:
+            self.worker.submit(step)
 
     def add_body_move(self, end: State, path: list[State]) -> None:
         """Record a body move on the current feet (no swing), e.g. :meth:`LocalPlanner.arrival`."""
         self.add(Step(-1, False, self.state, end, None, path, [], "arrival"))
 
-    def mark(self) -> tuple[int, int, int]:
-        """A bookmark for :meth:`rewind`."""
-        return len(self.keyframes), len(self.samples), self.steps
+    @property
+    def keyframes(self) -> list[State]:
+        """Start; per step its body move's end (a placement: its mid-swing, its landing)."""
+        return self._time()[0]
 
-    def rewind(self, mark: tuple[int, int, int]) -> None:
+    @property
+    def samples(self) -> list[State]:
+        """The walk's dense samples (the executor's)."""
+        return self._time()[1]
+
+    @property
+    def times(self) -> list[float]:
+        """The samples' times [s] from the walk's start."""
+        return self._time()[2]
+
+    def _time(self) -> tuple:
+        """(keyframes, samples, times) of the recorded steps, in the executor's timing."""
+        if self._timed is not None:
+            return self._timed
+        p, w = self.planner, self.worker
+        if w is not None:
+            w.finish(self.parts)
+        keyframes, samples, times = [self.start], [self.start], [0.0]
+        for step in self.parts:
+            if w is not None:
+                w.wait_for(step)
+            states, t = p.step_samples(step)
+            t = times[-1] + t
+            n_body = max(len(step.body_path) - 1, 0)
+            if step.overlap is not None:  # the leg lifts at this body sample (local.overlap)
+                n_body = step.overlap.lift
+            p._append(samples, times, states[: 1 + n_body], t[1 : 1 + n_body])
+            keyframes.append(step.moved)
+            if step.ok:
+                p._append(samples, times, states[n_body:], t[1 + n_body :])
+                swing = step.swing_path if step.overlap is None else states[n_body:]
+                keyframes += [p._swing_keyframe(swing, step.leg, p.check), step.end]
+        self._timed = (keyframes, samples, times)
+        return self._timed
+
+    def mark(self) -> tuple[int, int]:
+        """A bookmark for :meth:`rewind`."""
+        return len(self.parts), self.steps
+
+    def rewind(self, mark: tuple[int, int]) -> None:
         """Forget everything recorded after ``mark`` (backtracking, section 8.5)."""
-        k, s, n = mark
-        del self.keyframes[k:], self.samples[s:], self.times[s:]
+        k, n = mark
+        if self.worker is not None:
+            self.worker.forget(self.parts[k:])
+        del self.parts[k:]
         self.steps = n
+        self._timed = None
 
     def copy(self) -> tuple:
         """The walk so far, for :meth:`restore` after a rewind (states are not copied)."""
-        return list(self.keyframes), list(self.samples), list(self.times), self.steps
+        return list(self.parts), self.steps
 
     def restore(self, kept: tuple) -> None:
         """Back to a walk kept by :meth:`copy`."""
-        keyframes, samples, times, self.steps = kept
-        self.keyframes, self.samples, self.times = list(keyframes), list(samples), list(times)
+        parts, self.steps = kept
+        self.parts = list(parts)
+        self._timed = None
 
 
 class NearestWalk:
@@ -1444,28 +1495,55 @@ class LocalPlanner:
 
         ``progress(distance_m, steps)`` is called after each step. Ctrl-C (or SIGTERM
         under :class:`planner.interrupts.Interrupts`) stops planning and returns the plan
-        so far (its message says so).
+        so far (its message says so). Planning runs on one BLAS thread (threadpoolctl),
+        whatever was imported first: the planner's matrices are small, and with numpy
+        imported before the planner (``planner/__init__.py`` sets the default only for a
+        numpy not yet loaded) two OpenBLAS threads spinning beside the overlap worker made
+        rough2cm's planning 30.7 s instead of 22.5 s.
         """
+        from threadpoolctl import threadpool_limits
+
+        with threadpool_limits(limits=1, user_api="blas"):
+            return self._plan(start_xy, goal_xy, tau, progress, start_state)
+
+    def _plan(self, start_xy, goal_xy, tau, progress, start_state) -> LocalPlan:
+        """:meth:`plan`'s work."""
         t_begin = time.perf_counter()
         self._failed_moves.clear()  # keyed by tau's id, which a new run may reuse
         if tau is None:
             tau = Trajectory.straight(start_xy, goal_xy, self.terrain, self.com_height_m())
         state = start_state if start_state is not None else self.initial_state(start_xy, tau)
         run = _Run(np.asarray(goal_xy, float)[:2], tau, t_begin, progress)
-        walk = Walk(self, state)
+        worker = None
+        if self.settings.overlap_worker and self.settings.swing_overlap > 0.0:
+            from planner.local.prefetch import OverlapWorker
+
+            worker = OverlapWorker.start(self)
+        walk = Walk(self, state, worker)
         try:
-            message = self._run(walk, run)
-        except KeyboardInterrupt:
-            message = f"interrupted after {walk.steps} steps; the plan so far is kept"
+            try:
+                message = self._run(walk, run)
+            except KeyboardInterrupt:
+                message = f"interrupted after {walk.steps} steps; the plan so far is kept"
+            with interrupts.shielded():  # timed now (the overlaps), inside planning time
+                walk.keyframes  # noqa: B018
+        finally:
+            if worker is not None:
+                worker.close()
+                walk.worker = None
         dist = self.distance_to_goal(walk.state, run)
-        stats = {
-            "planner": self.name,
-            "cycles": run.cycles,
-            "steps": walk.steps,
-            "planning_time_s": time.perf_counter() - t_begin,
-            "solves": {k: {"count": v[0], "feasible": v[1]} for k, v in self.stats.items()},
-            "failures": self.failures[-50:],
-        } | self.extra_stats
+        stats = (
+            {
+                "planner": self.name,
+                "cycles": run.cycles,
+                "steps": walk.steps,
+                "planning_time_s": time.perf_counter() - t_begin,
+                "overlap_worker_steps": 0 if worker is None else worker.used,  # timed by it
+                "solves": {k: {"count": v[0], "feasible": v[1]} for k, v in self.stats.items()},
+                "failures": self.failures[-50:],
+            }
+            | self.extra_stats
+        )
         return LocalPlan(
             keyframes=walk.keyframes,
             samples=walk.samples,
@@ -1540,8 +1618,8 @@ class LocalPlanner:
         if interrupts.requested():
             return f"interrupted after {walk.steps} steps; the plan so far is kept"
         dist = self.distance_to_goal(walk.state, run)
-        if dist > ARRIVAL_M and run.arrival_tried != len(walk.keyframes):
-            run.arrival_tried = len(walk.keyframes)
+        if dist > ARRIVAL_M and run.arrival_tried != walk.n_keyframes:
+            run.arrival_tried = walk.n_keyframes
             moved = self.arrival(walk.state, run.goal, run.tau, dist <= st.goal_tol_m)
             if moved is not None:
                 walk.add_body_move(*moved)
