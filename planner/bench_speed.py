@@ -24,6 +24,7 @@ import json
 import pstats
 import statistics
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -42,6 +43,10 @@ __all__ = [
 # (terrain, goal x [m]) from (0.2, 0): issue 16's courses, walks of 2 m
 COURSES = ("rough2cm", "flat", "step5cm", "stairs")
 PRESETS = ("default", "fast")  # the settings compared side by side
+# a preset name ending so is planned without the overlap worker (planner.local.prefetch):
+# "default-serial" beside "default" measures the worker (runs one after the other, so
+# that each has the machine's two cores)
+SERIAL = "-serial"
 FLAT_LENGTHS_M = (1.0, 2.0, 4.0, 8.0)
 START_XY = (0.2, 0.0)
 # where the time goes: the first group whose any path fragment is in a module's file name
@@ -130,7 +135,10 @@ def _plan_once(
     terrain = _flat(length_m) if length_m is not None else load_terrain(terrain_name)
     from planner.settings import preset_settings
 
-    settings = preset_settings(preset)
+    base, serial = _preset_and_mode(preset)
+    settings = preset_settings(base)
+    if serial:  # the overlaps timed in the planning process (no worker, 1.5x on rough2cm)
+        settings = replace(settings, overlap_worker=False)
     prof = cProfile.Profile() if profile else None
     t0 = time.perf_counter()
     if prof is not None:
@@ -149,10 +157,18 @@ def _plan_once(
         "check_ok": bool(report.ok),
         "steps": int(plan.stats.get("steps", 0)),
         "planning_s": float(plan.stats.get("planning_time_s", wall)),
+        "worker_steps": int(plan.stats.get("overlap_worker_steps", 0)),
         "wall_s": wall,
         "walk_s": float(s.time[-1] - s.time[0]) if len(s) else 0.0,
         "groups": profile_groups(pstats.Stats(prof)) if prof is not None else None,
     }
+
+
+def _preset_and_mode(preset: str) -> tuple[str, bool]:
+    """("fast", True) of "fast-serial": a preset planned without the overlap worker."""
+    if preset.endswith(SERIAL):
+        return preset[: -len(SERIAL)], True
+    return preset, False
 
 
 def _simulate(plan) -> dict[str, dict]:
@@ -212,6 +228,7 @@ def _measure(
         "reached": all(r["reached"] for r in runs),
         "check_ok": all(r["check_ok"] for r in runs),
         "steps": last["steps"],
+        "worker_steps": last["worker_steps"],  # steps whose overlap the worker searched
         "planning_s": planning,
         "planning_median_s": statistics.median(planning),
         "planning_per_m_s": statistics.median(planning) / metres,
@@ -304,11 +321,14 @@ def render_markdown(result: dict[str, Any]) -> str:
         "planning = the local planner; total = all that `stratawalk plan` does (planning, "
         "assembly, `check`); walk = the plan's duration. Where the time goes: one more run "
         "under cProfile, own time per group of modules (a library function counts for its "
-        "heaviest caller's group), in % of the profiled total (profiling slows it down).",
+        "heaviest caller's group), in % of the profiled total (profiling slows it down; "
+        "the planning process only: the swing overlaps searched by the overlap worker, "
+        "planner.local.prefetch, are not in it, but they are in a `-serial` preset's).",
         "",
         "Presets: default = the settings' defaults (the paper's Lambda_c, 0.5 m/s^2); fast = "
         "`stratawalk plan --preset fast` (two body moves per crawl cycle, long strides on "
-        "level ground, 1.5 m/s^2, 2 cm swing height).",
+        "level ground, 1.5 m/s^2, 2 cm swing height); NAME-serial = that preset without the "
+        "overlap worker (each step's swing overlap searched in the planning process itself).",
         "",
     ]
     if result.get("cli_start_s"):
@@ -401,7 +421,8 @@ def add_speed_parser(subparsers) -> Any:
     p.add_argument(
         "--presets",
         default=",".join(PRESETS),
-        help="settings compared side by side: default and/or presets of plan --preset",
+        help="settings compared side by side: default and/or presets of plan --preset; "
+        f"NAME{SERIAL}: that preset without the overlap worker",
     )
     p.add_argument("--out", default="bench/results", help="output folder")
     p.set_defaults(func=cmd_speed)
@@ -429,8 +450,12 @@ def cmd_speed(args) -> int:
     from planner.terrain import load_terrain
 
     for p in presets:
-        if p != "default" and p not in KNOWN:
-            raise InputError(f"--presets: unknown {p!r}; known: default, {', '.join(KNOWN)}")
+        name = _preset_and_mode(p)[0]
+        if name != "default" and name not in KNOWN:
+            raise InputError(
+                f"--presets: unknown {p!r}; known: default, {', '.join(KNOWN)} (each also "
+                f"as NAME{SERIAL}: without the overlap worker)"
+            )
     if not presets:
         raise InputError("--presets: name at least one (default, fast)")
 

@@ -39,9 +39,11 @@ def test_profile_groups_give_library_time_to_the_heaviest_caller():
 def test_a_tiny_speed_bench_writes_its_tables(tmp_path, capsys):
     """One course and one flat length, once each in a new process (the course's plan also in
     MuJoCo), plus the profiled run."""
-    res = run_speed_bench(("flat",), 0.45, (0.25,), 1, tmp_path, ("default", "fast"))
+    res = run_speed_bench(("flat",), 0.45, (0.25,), 1, tmp_path, ("default", "fast-serial"))
     (row, fast), (flat,) = res["courses"], res["flat"]
-    assert (row["preset"], fast["preset"]) == ("default", "fast")
+    assert (row["preset"], fast["preset"]) == ("default", "fast-serial")
+    # the overlap worker forks inside the bench's spawned process; -serial plans without it
+    assert row["worker_steps"] > 0 and fast["worker_steps"] == 0
     assert fast["reached"] and fast["check_ok"] and fast["mujoco"]["open"]["reached"]
     assert row["reached"] and row["check_ok"] and row["steps"] >= 4
     assert row["planning_median_s"] > 0 and row["total_median_s"] >= row["planning_median_s"]
@@ -51,7 +53,7 @@ def test_a_tiny_speed_bench_writes_its_tables(tmp_path, capsys):
     assert flat["course"] == "flat 0.25 m" and flat["reached"] and "breakdown_s" not in flat
     assert json.loads((tmp_path / "speed.json").read_text())["format"] == "stratawalk.bench.speed/1"
     md = (tmp_path / "speed.md").read_text()
-    assert "| flat | default | yes, ok |" in md and "| flat | fast | yes, ok |" in md
+    assert "| flat | default | yes, ok |" in md and "| flat | fast-serial | yes, ok |" in md
     assert "## Flat walks by length" in md
     # the first plan, executed in MuJoCo at its own timing: it holds up
     for mode in ("open", "feedback"):
@@ -62,3 +64,5 @@ def test_a_tiny_speed_bench_writes_its_tables(tmp_path, capsys):
     assert "--repeats: must be >= 1" in capsys.readouterr().err
     assert main(["bench", "speed", "--presets", "slow", "--out", str(tmp_path)]) == 2
     assert "--presets: unknown 'slow'; known: default, fast" in capsys.readouterr().err
+    assert main(["bench", "speed", "--presets", "slow-serial", "--out", str(tmp_path)]) == 2
+    assert "--presets: unknown 'slow-serial'" in capsys.readouterr().err
