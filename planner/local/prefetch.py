@@ -17,6 +17,7 @@ back (8.5) before its turn is never sent.
 from __future__ import annotations
 
 import multiprocessing as mp
+import os
 import signal
 import warnings
 from typing import TYPE_CHECKING
@@ -27,15 +28,28 @@ if TYPE_CHECKING:
 __all__ = ["OverlapWorker"]
 
 _PLANNER: LocalPlanner | None = None  # the planner a forked worker serves
+ENV_OFF = "STRATAWALK_OVERLAP_WORKER"  # "0": no worker in this process (nor its children)
+PARENT_LOOK_S = 1.0  # how often an idle worker looks whether the planner's process is alive
 
 
-def _serve(conn) -> None:
-    """The worker: (key, step) in, (key, ok, overlap or error text) out, until None or EOF."""
+def _serve(conn, parent_end, parent_pid: int) -> None:
+    """The worker: (key, step) in, (key, ok, overlap or error text) out, until None or EOF.
+
+    It closes its copy of the planner's end of the pipe (else the pipe never reports EOF)
+    and ends when the planner's process does: killed with it where Linux can
+    (PR_SET_PDEATHSIG), else at its next look (a batch job killed on Ctrl-C left its worker
+    blocked on the pipe, and the batch hung).
+    """
     from planner.local.overlap import overlap_step
 
+    parent_end.close()
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the planner's to handle
+    _die_with_parent()
     while True:
         try:
+            while not conn.poll(PARENT_LOOK_S):
+                if os.getppid() != parent_pid:
+                    return
             msg = conn.recv()
         except (EOFError, OSError):
             return
@@ -47,6 +61,17 @@ def _serve(conn) -> None:
         except Exception as exc:  # reported; the planner then computes it itself
             out = (key, False, f"{type(exc).__name__}: {exc}")
         conn.send(out)
+
+
+def _die_with_parent() -> None:
+    """Ask Linux to kill this process when its parent dies (best effort)."""
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
 
 
 class OverlapWorker:
@@ -65,7 +90,9 @@ class OverlapWorker:
         self._conn, child = ctx.Pipe()
         _PLANNER = planner
         try:
-            self._proc = ctx.Process(target=_serve, args=(child,), daemon=True)
+            self._proc = ctx.Process(
+                target=_serve, args=(child, self._conn, os.getpid()), daemon=True
+            )
             self._proc.start()
         finally:
             _PLANNER = None
@@ -77,8 +104,11 @@ class OverlapWorker:
 
     @classmethod
     def start(cls, planner: LocalPlanner) -> OverlapWorker | None:
-        """A worker for ``planner``, or None where no process can be forked."""
-        if "fork" not in mp.get_all_start_methods():
+        """A worker for ``planner``, or None (no fork; ``ENV_OFF`` set to "0").
+
+        ``ENV_OFF`` is for a caller that already runs a planning process per core.
+        """
+        if os.environ.get(ENV_OFF, "") == "0" or "fork" not in mp.get_all_start_methods():
             return None
         try:
             return cls(planner)
