@@ -3,12 +3,17 @@ the bit as the planner computing them itself, through rewinds, and without a wor
 
 import copy
 import multiprocessing
+import os
+import signal
+import subprocess
+import sys
+import time
 
 import numpy as np
 import pytest
 
 from planner.local.base import LocalSettings, Walk
-from planner.local.prefetch import OverlapWorker
+from planner.local.prefetch import ENV_OFF, OverlapWorker
 from planner.local.soft import SoftPlanner
 from planner.terrain import load_terrain
 from planner.trajectory import Trajectory
@@ -119,3 +124,44 @@ def test_without_fork_there_is_no_worker(three_steps, monkeypatch):
     planner = three_steps[0]
     monkeypatch.setattr(multiprocessing, "get_all_start_methods", lambda: ["spawn"])
     assert OverlapWorker.start(planner) is None
+
+
+def _children(pid: int) -> list[str]:
+    ps = subprocess.run(["ps", "-o", "pid=,stat=", "--ppid", str(pid)], capture_output=True)
+    rows = [line.split() for line in ps.stdout.decode().splitlines() if line.strip()]
+    return [row[0] for row in rows if not row[1].startswith("Z")]
+
+
+def test_a_planner_killed_takes_its_worker_with_it(tmp_path):
+    """``stratawalk plan`` killed outright (SIGKILL: no handler, no atexit) while its worker
+    runs: the worker is gone within seconds, nothing of the session is left (a batch job
+    stopped on Ctrl-C once left its worker blocked on the pipe, and the batch hung)."""
+    env = dict(os.environ, **{ENV_OFF: "1"})
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "planner.cli", "plan", "--terrain", "flat", "--goal", "2.2,0",
+         "--out", str(tmp_path / "p.json")],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True, env=env,
+    )  # fmt: skip
+    try:
+        deadline = time.monotonic() + 300
+        while not _children(proc.pid):  # the worker is forked when planning starts
+            assert proc.poll() is None and time.monotonic() < deadline
+            time.sleep(0.2)
+        worker = _children(proc.pid)
+        proc.kill()
+        proc.wait()
+        deadline = time.monotonic() + 10
+        while any(os.path.exists(f"/proc/{pid}") and _alive(pid) for pid in worker):
+            assert time.monotonic() < deadline, f"worker {worker} outlived its planner"
+            time.sleep(0.2)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+
+
+def _alive(pid: str) -> bool:
+    try:
+        state = open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
