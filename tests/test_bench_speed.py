@@ -36,9 +36,10 @@ def test_profile_groups_give_library_time_to_the_heaviest_caller():
     assert sum(got.values()) == pytest.approx(sum(v[2] for v in stats.stats.values()))
 
 
-def test_a_tiny_speed_bench_writes_its_tables(tmp_path, capsys):
+def test_a_tiny_speed_bench_writes_its_tables(tmp_path, capsys, monkeypatch):
     """One course and one flat length, once each in a new process (the course's plan also in
     MuJoCo), plus the profiled run."""
+    monkeypatch.setenv("STRATAWALK_OVERLAP_WORKER", "1")  # as a lone bench run has it
     res = run_speed_bench(("flat",), 0.45, (0.25,), 1, tmp_path, ("default", "fast-serial"))
     (row, fast), (flat,) = res["courses"], res["flat"]
     assert (row["preset"], fast["preset"]) == ("default", "fast-serial")

@@ -20,6 +20,12 @@ from planner.trajectory import Trajectory
 from planner.walk import plan_walk
 
 
+@pytest.fixture(autouse=True)
+def worker_on(monkeypatch):
+    """The worker even where the suite runs a planning process per core (conftest)."""
+    monkeypatch.setenv(ENV_OFF, "1")
+
+
 def _same_walk(a, b) -> None:
     assert len(a.samples) == len(b.samples) and len(a.keyframes) == len(b.keyframes)
     np.testing.assert_array_equal(a.times, b.times)
@@ -165,3 +171,18 @@ def _alive(pid: str) -> bool:
     except OSError:
         return False
     return state != "Z"
+
+
+def test_a_pool_with_a_process_per_core_plans_without_the_worker():
+    """batch and bench's pools (planner.batch.run_pool): a job process per core turns the
+    worker off in each (it would only add a process per core); fewer leave it on."""
+    from planner.batch import run_pool
+
+    def error(job, exc):
+        raise exc
+
+    cores = os.cpu_count() or 1
+    got = list(run_pool(os.getenv, [ENV_OFF], cores, error))
+    assert got == ["0"]
+    if cores > 1:
+        assert list(run_pool(os.getenv, [ENV_OFF], 1, error)) == ["1"]  # the fixture's
