@@ -186,3 +186,17 @@ def test_a_pool_with_a_process_per_core_plans_without_the_worker():
     assert got == ["0"]
     if cores > 1:
         assert list(run_pool(os.getenv, [ENV_OFF], 1, error)) == ["1"]  # the fixture's
+
+
+def test_a_step_that_does_not_pickle_is_timed_by_the_planner(three_steps):
+    planner, start, steps, short = three_steps
+    alone = _walk_through(planner, start, *_fresh([steps, short]), worker=None)
+    fresh, fresh_short = _fresh([steps, short])
+    fresh[0].body_path[0].info["not_picklable"] = lambda: None
+    worker = OverlapWorker.start(planner)
+    try:
+        walk = _walk_through(planner, start, fresh, fresh_short, worker=worker)
+        _same_walk(alone, walk)
+        assert fresh[0].timed and worker.used >= 1  # the others went to the worker
+    finally:
+        worker.close()

@@ -165,9 +165,11 @@ class OverlapWorker:
     def _send(self, step: Step) -> None:
         try:
             self._conn.send((id(step), step))
-        except (OSError, ValueError, BrokenPipeError):
+        except (OSError, ValueError):
             self._queue.clear()  # the worker is gone: the planner computes the rest
             return
+        except Exception:  # a step that does not pickle (pickled before any byte is sent)
+            return  # the planner computes this one
         self._busy = step
         self.sent += 1
 
