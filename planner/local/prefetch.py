@@ -60,7 +60,10 @@ def _serve(conn, parent_end, parent_pid: int) -> None:
             out = (key, True, overlap_step(_PLANNER, step))
         except Exception as exc:  # reported; the planner then computes it itself
             out = (key, False, f"{type(exc).__name__}: {exc}")
-        conn.send(out)
+        try:
+            conn.send(out)
+        except OSError:  # the planner is gone
+            return
 
 
 def _die_with_parent() -> None:
