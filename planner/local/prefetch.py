@@ -137,15 +137,14 @@ class OverlapWorker:
         step, and the caller computes the rest from the front, waiting
         (:meth:`wait_for`) only for the one in the worker.
         """
-        wanted = {id(s) for s in steps}
         self._queue = []
+        if self._busy is not None and all(s is not self._busy for s in steps):
+            self._pump(block=True)  # a traced-back step: wait it out, its answer unused
         self._pump(block=False)
         if self._busy is None:
             last = next((s for s in reversed(steps) if not s.timed), None)
             if last is not None:
                 self._send(last)
-        elif id(self._busy) not in wanted:
-            self._pump(block=True)  # a traced-back step: its answer is dropped
 
     def wait_for(self, step: Step) -> None:
         """If ``step`` is in the worker, wait for its answer (it is then timed)."""

@@ -525,26 +525,14 @@ class Theta2(ThetaProblem):
         """
         x, p, state = self._at_start(start, rc_star_W, u_f, u_n, swing_target_W)
         margin = self.options.balance_margin_m
-        return ThetaSolution(
-            problem=self.name,
-            status="support_too_small",
-            feasible=False,
-            state=state,
-            objective=self.objective_at(x, p),
-            objective_terms={},
-            iterations=0,
-            solve_time_s=0.0,
-            build_time_s=self.build_time_s,
-            diagnosis=(
-                f"{self.name}: no solve; violated: 'balance_margin' by {margin - room_m:.3g} m "
-                f"(the support triangle's inradius is {1000 * room_m:.1f} mm: no body pose "
-                f"keeps the {1000 * margin:.0f} mm margin)"
-            ),
-            # the one shortfall no pose removes (the start's own violations are moot)
-            violations={"balance_margin": margin - room_m},
-            x=x,
-            p=p,
+        diagnosis = (
+            f"{self.name}: no solve; violated: 'balance_margin' by {margin - room_m:.3g} m "
+            f"(the support triangle's inradius is {1000 * room_m:.1f} mm: no body pose "
+            f"keeps the {1000 * margin:.0f} mm margin)"
         )
+        # the one shortfall no pose removes (the start's own violations are moot)
+        violations = {"balance_margin": margin - room_m}
+        return self._unsolved(x, p, state, "support_too_small", False, diagnosis, violations)
 
     def hold(self, start: State, rc_star_W, u_f, u_n, swing_target_W=None) -> ThetaSolution:
         """Theta2's constraints at ``start`` itself: the body stays where it stands.
@@ -562,9 +550,14 @@ class Theta2(ThetaProblem):
         violations = self._violations(state, x, p)
         worst = max(violations.values(), default=0.0)
         feasible = bool(np.isfinite(worst) and worst <= FEASIBILITY_TOL)
+        diagnosis = "" if feasible else self._diagnose("held", violations)
+        return self._unsolved(x, p, state, "held", feasible, diagnosis, violations)
+
+    def _unsolved(self, x, p, state, status, feasible, diagnosis, violations) -> ThetaSolution:
+        """The solution of the start itself (:meth:`_at_start`), with no IPOPT solve."""
         return ThetaSolution(
             problem=self.name,
-            status="held",
+            status=status,
             feasible=feasible,
             state=state,
             objective=self.objective_at(x, p),
@@ -572,7 +565,7 @@ class Theta2(ThetaProblem):
             iterations=0,
             solve_time_s=0.0,
             build_time_s=self.build_time_s,
-            diagnosis="" if feasible else self._diagnose("held", violations),
+            diagnosis=diagnosis,
             violations=violations,
             x=x,
             p=p,
