@@ -192,6 +192,13 @@ GUIDE_FAILS = 2  # failed cycles in a row after which feedback stops following t
 # the plan's (step10cm's recursive plan: HR's corrected knee 66 degrees off, the foot on
 # the step edge, a fall)
 SWING_JUMP_RAD = 0.35
+# a corrected cycle whose feet leave their legs' reach (a stance foot measured a few
+# millimetres off a plan that has the leg stretched: barrier9cm's recursive plan, HR at its
+# reach limit) has its body moved toward them by the worst sample's miss, up to this far
+# in all [m], in at most REACH_SHIFTS rounds (correct_cycle); the gates of
+# _follow_corrected (balance, leg links, path checks) judge the shifted samples
+REACH_SHIFT_M = 0.01
+REACH_SHIFTS = 3
 REPLANS = 2  # ... and re-plans the rest of the walk from the measured state, at most so often
 REPLAN_BUDGET_S = 120.0  # planning time of one such re-plan [s] (the robot stands on four feet)
 MAX_ARRIVALS = 2  # arrival moves (four feet, COM over the goal) tried from measured states
@@ -367,6 +374,7 @@ def run_feedback(
     1 cm closer to the goal in
     ``no_progress_cycles`` cycles, or on a fall.
     """
+    from planner import stability
     from planner.local.base import ARRIVAL_M
     from planner.local.gait_queue import GaitQueue
     from planner.local.soft import SoftPlanner
@@ -456,17 +464,38 @@ def run_feedback(
                     if step.ok:
                         on_plan = True
                         break
-                if (
-                    may_correct
-                    and not plan_steps_first
-                    and step.phase == "body_move"
-                    and not step.ok
-                ):
+                if may_correct and not plan_steps_first and not step.ok:
                     ran = _follow_corrected(
                         ex, meas, robot, terrain, s_plan, centres, *guide_cycles[g], sim, local
                     )
                     if ran is not None:
                         why = f"{step.diagnosis}; executed the plan's step, corrected (8.4)"
+                        local._log_failure(cycles, leg, step.phase, state, why)
+            if ran is None:
+                # back off before giving a leg up: shorter steps over a more centred body
+                # (8.5's ambitions); a failed body move leaves the robot standing where it
+                # was measured
+                for frac, shrink in BACKOFF if step is None or not step.ok else ():
+                    stride = local.stride_at(state, leg, tau) * step_scale[leg] * frac
+                    step = local.step(state, leg, tau, stride, shrink)
+                    if step.ok:
+                        break
+                if may_correct and not step.ok:
+                    # no step planned anew at all: the plan's own step, corrected, held to
+                    # the balance margin the plan's path samples keep (20 mm) instead of
+                    # the keyframes' 25 mm, rather than a failed cycle that leaves the plan
+                    # (barrier9cm's recursive plan: HR's step at its reach limit, 22.5 mm
+                    # in the plan, 23.8 mm corrected; refused, the robot left the plan
+                    # and stalled 127 cm short)
+                    ran = _follow_corrected(
+                        ex, meas, robot, terrain, s_plan, centres, *guide_cycles[g], sim, local,
+                        balance_m=stability.PATH_BALANCE_MARGIN_M,
+                    )  # fmt: skip
+                    if ran is not None:
+                        why = f"{step.diagnosis}; executed the plan's step, corrected (8.4), "
+                        why += (
+                            f"{stability.PATH_BALANCE_MARGIN_M * 1000:.0f} mm inside its supports"
+                        )
                         local._log_failure(cycles, leg, step.phase, state, why)
             if ran is not None:
                 g, fails, steps, corrected = g + 1, 0, steps + 1, corrected + 1
@@ -477,13 +506,6 @@ def run_feedback(
                     message = f"fell at {m.fall_time_s:.1f} s ({m.fall_reason})"
                     break
                 continue
-            # back off before giving a leg up: shorter steps over a more centred body (8.5's
-            # ambitions); a failed body move leaves the robot standing where it was measured
-            for frac, shrink in BACKOFF if step is None or not step.ok else ():
-                stride = local.stride_at(state, leg, tau) * step_scale[leg] * frac
-                step = local.step(state, leg, tau, stride, shrink)
-                if step.ok:
-                    break
             if step.ok:
                 step_scale[leg] = 1.0
                 fails = 0
@@ -595,8 +617,10 @@ def correct_cycle(
     corrected ones is spread over the cycle's four-feet phase (until the first lift-off).
     The base starts at its measured pose and reaches the plan's (shifted by the feet's
     mean offset) by the end of that four-feet phase: a plan's body attitude 16 degrees
-    from the measured one (gen:12:0.6) is turned to, not commanded at once.
-    Returns (corrected q (n, 19), IK misses).
+    from the measured one (gen:12:0.6) is turned to, not commanded at once. Where feet
+    then leave their legs' reach, the body is moved toward them by one offset for the
+    cycle (at most ``REACH_SHIFT_M``), taken on over the same phase.
+    Returns (corrected q (n, 19), IK misses: legs out of reach summed over samples).
     """
     from planner.kinematics import kinematics_of
     from planner.lie import (
@@ -615,7 +639,6 @@ def correct_cycle(
     d, pos_err, rot_err = _base_error(plan_q[0], plan_contact[0], plan_centres[0], c_meas, meas)
     clock = np.arange(n, dtype=float) if times is None else np.asarray(times, float)
     span = max(float(clock[max(k_end, 0)] - clock[0]), 1e-9)
-    misses = 0
     lift = [None] * 4  # sample of lift-off and of touchdown, per leg
     for i in range(4):
         up = np.flatnonzero(~plan_contact[:, i])
@@ -624,40 +647,80 @@ def correct_cycle(
             after = np.flatnonzero(plan_contact[ks:, i])
             kt = ks + int(after[0]) if after.size else n - 1
             lift[i] = (max(ks - 1, 0), kt)
+    poses, targets, swinging = [], np.empty((n, 4, 3)), np.zeros((n, 4), bool)
     for k in range(n):
         w = 1.0 - min(float(clock[k] - clock[0]) / span, 1.0) if k_end > 0 else 0.0
-        p = plan_q[k, :3] + d + w * pos_err
         R = rotation_from_vector(w * rot_err) @ rotation_from_quat(plan_q[k, 3:7])
-        ref = robot.joints_from_q(plan_q[k])
-        joints = np.empty((4, 3))
+        poses.append((plan_q[k, :3] + d + w * pos_err, R, w))
         for i in range(4):
             if lift[i] is None or k <= lift[i][0]:  # measured start + the planned rolling
-                target = plan_centres[k, i] + (c_meas[i] - plan_centres[0, i])
+                targets[k, i] = plan_centres[k, i] + (c_meas[i] - plan_centres[0, i])
             elif k < lift[i][1]:
                 a, b = lift[i]
                 u = (k - a) / max(b - a, 1)
-                target = plan_centres[k, i] + (1.0 - u) * (c_meas[i] - plan_centres[0, i])
+                targets[k, i] = plan_centres[k, i] + (1.0 - u) * (c_meas[i] - plan_centres[0, i])
             else:
-                target = plan_centres[k, i]
-            # the plan sample's own knee branch: a leg the plan landed on its other knee
-            # beside an edge (LocalPlanner._other_knee_landing) keeps it; the leg's
-            # default branch put barrier75mm's FR shank 33 mm into the barrier
-            res = kin.ik_leg(
-                i, R.T @ (target - p), reference_rad=ref[i], knee=kin.knee_direction(i, ref[i])
-            )
-            swinging = lift[i] is not None and lift[i][0] < k < lift[i][1]
-            if swinging and float(np.max(np.abs(res.joints_rad - ref[i]))) > SWING_JUMP_RAD:
-                # IK took another solution than the plan's swing (a joint-space swing
-                # over an edge flips the knee mid-air): the plan's joints in the corrected
-                # body, the foot off by the body's correction until it lands
-                joints[i] = ref[i]
-                continue
-            misses += int(not res.reachable)
-            joints[i] = res.joints_rad
-        out[k] = robot.q_from(p, quat_from_rotation(R) if w > 0.0 else plan_q[k, 3:7], joints)
+                targets[k, i] = plan_centres[k, i]
+            swinging[k, i] = lift[i] is not None and lift[i][0] < k < lift[i][1]
+
+    def corrected(shift_W):
+        """(q (n, 19), reach misses (n, 4, 3)) with the body shifted by ``shift_W``."""
+        q, miss = plan_q.copy(), np.zeros((n, 4, 3))
+        for k, (p, R, w) in enumerate(poses):
+            p = p + (1.0 - w) * shift_W  # the shift grows as the measured error fades
+            ref = robot.joints_from_q(plan_q[k])
+            joints, miss[k] = _corrected_legs(kin, p, R, targets[k], ref, swinging[k])
+            q[k] = robot.q_from(p, quat_from_rotation(R) if w > 0.0 else plan_q[k, 3:7], joints)
+        return q, miss
+
+    # a foot the plan has at its leg's reach, measured a few millimetres off, is out of
+    # reach of the plan's body: the whole cycle's body is moved toward it (one constant
+    # offset, reached over the four-feet phase like the measured error's correction)
+    shift = np.zeros(3)
+    out, miss = corrected(shift)
+    for _ in range(REACH_SHIFTS):
+        total = miss.sum(axis=1)  # (n, 3): each sample's pull on the body
+        worst = int(np.argmax(np.linalg.norm(total, axis=1)))
+        trial = shift + total[worst]
+        if not miss.any() or np.linalg.norm(trial) > REACH_SHIFT_M:
+            break
+        q_t, miss_t = corrected(trial)
+        if _misses(miss_t) >= _misses(miss):
+            break
+        shift, out, miss = trial, q_t, miss_t
+    misses = _misses(miss)
     if times is not None and current_joints is not None:
         out = blend_in(robot, out, plan_contact, times, current_joints)
     return out, misses
+
+
+def _misses(miss: _Array) -> int:
+    """Legs out of reach, summed over samples, of reach misses (n, 4, 3)."""
+    return int(np.count_nonzero(np.linalg.norm(miss, axis=-1) > 0.0))
+
+
+def _corrected_legs(kin, p: _Array, R: _Array, targets_W: _Array, ref: _Array, swinging):
+    """(joints (4, 3), reach misses (4, 3) world [m]) of the legs for body pose (p, R).
+
+    Each foot's IK on the plan sample's own knee branch: a leg the plan landed on its
+    other knee beside an edge (LocalPlanner._other_knee_landing) keeps it; the leg's
+    default branch put barrier75mm's FR shank 33 mm into the barrier. A miss is the
+    target less the closest reachable foot centre (zero where reached); a swinging leg
+    whose IK jumps to another solution than the plan's keeps the plan's joints (a
+    joint-space swing over an edge flips the knee mid-air: the foot off by the body's
+    correction until it lands), not a miss.
+    """
+    joints, miss = np.empty((4, 3)), np.zeros((4, 3))
+    for i in range(4):
+        target_B = R.T @ (targets_W[i] - p)
+        res = kin.ik_leg(i, target_B, reference_rad=ref[i], knee=kin.knee_direction(i, ref[i]))
+        if swinging[i] and float(np.max(np.abs(res.joints_rad - ref[i]))) > SWING_JUMP_RAD:
+            joints[i] = ref[i]
+            continue
+        joints[i] = res.joints_rad
+        if not res.reachable:
+            miss[i] = R @ (target_B - kin.foot_B(i, res.joints_rad))
+    return joints, miss
 
 
 def _base_error(
@@ -736,7 +799,18 @@ def blend_in(robot, q: _Array, contact: NDArray, times: _Array, current_joints: 
 
 
 def _follow_corrected(
-    ex, meas, robot, terrain, s: Samples, centres, a: int, b: int, sim, local=None, refused=None
+    ex,
+    meas,
+    robot,
+    terrain,
+    s: Samples,
+    centres,
+    a: int,
+    b: int,
+    sim,
+    local=None,
+    refused=None,
+    balance_m: float | None = None,
 ):
     """Execute plan samples a..b corrected from the measurement ``meas`` (8.4), or None.
 
@@ -748,13 +822,15 @@ def _follow_corrected(
     (the plan's swing over an edge, from a body a few centimetres off, hit barrier75mm);
     else whether the robot is still standing.
 
-    Balance asks the keyframes' ``BALANCE_MARGIN_M`` (25 mm) at every three-foot sample,
-    5 mm more than the plan's own path samples keep: the step is a fallback, executed
-    open loop from a state the plan was not made for, with errors the correction does
-    not model (the feet's rolling, the servos' sag). At 20 mm gen:11's corrected
-    hind-leg swing after a 6 cm step down (21-22 mm all along) tipped the body 34 degrees;
-    with 25 mm the step is refused, the gait queue steps instead, and the walk reaches
-    the goal (the generated physics bench: 24 of 25 feedback runs, from 23).
+    Balance asks ``balance_m`` at every three-foot sample, by default (None) the keyframes'
+    ``BALANCE_MARGIN_M`` (25 mm), 5 mm more than the plan's own path samples keep: the
+    step is a fallback, executed open loop from a state the plan was not made for, with
+    errors the correction does not model (the feet's rolling, the servos' sag). At 20 mm
+    gen:11's corrected hind-leg swing after a 6 cm step down (21-22 mm all along) tipped
+    the body 34 degrees; with 25 mm the step is refused, the gait queue steps instead, and
+    the walk reaches the goal (the generated physics bench: 24 of 25 feedback runs, from
+    23). :func:`run_feedback` asks the path samples' 20 mm only where no step planned
+    anew is found at all.
 
     With ``local`` (a :class:`~planner.local.base.LocalPlanner`) the corrected samples,
     before the servo blend, must also pass the check every path planned anew passes
@@ -767,11 +843,12 @@ def _follow_corrected(
     four-feet phase is shorter. Where a gate refuses, its reason is appended to the list
     ``refused``.
     """
+    from planner import stability
     from planner.kinematics import kinematics_of
     from planner.lie import rotation_from_quat
     from planner.links import leg_links
-    from planner.stability import BALANCE_MARGIN_M, support_margin_m
 
+    balance_m = stability.BALANCE_MARGIN_M if balance_m is None else balance_m
     times, contact = s.time[a : b + 1], s.contact[a : b + 1]
     plan_q, plan_centres = s.q[a : b + 1], centres[a : b + 1]
     c_meas = _foot_centres(robot, meas.q)
@@ -798,9 +875,9 @@ def _follow_corrected(
         R, joints = rotation_from_quat(qk[3:7]), robot.joints_from_q(qk)
         feet = kin.feet_W(qk[:3], R, joints)[ck]
         com = qk[:3] + R @ kin.com_B(joints)
-        if (tip := support_margin_m(feet, com)) < BALANCE_MARGIN_M:
+        if (tip := stability.support_margin_m(feet, com)) < balance_m:
             why = f"the corrected step's COM {tip * 1000:.1f} mm inside its support"
-            return _refuse(refused, f"{why} (< {BALANCE_MARGIN_M * 1000:.0f} mm)")
+            return _refuse(refused, f"{why} (< {balance_m * 1000:.0f} mm)")
     if local is not None:
         centres_W = np.array([_foot_centres(robot, qk) for qk in q_body])
         path = states_of_samples(robot, terrain, q_body, contact, times, centres_W)

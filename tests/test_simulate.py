@@ -325,6 +325,35 @@ def test_feedback_falls_back_on_the_plans_step_corrected(short_plan, monkeypatch
         assert np.linalg.norm(landed[:2] - foot[:2]) < 0.015, (k, landed, foot)
 
 
+def test_feedback_takes_the_plans_step_at_the_path_margin_when_nothing_else_steps(
+    short_plan, monkeypatch
+):
+    """No step planned anew at all (every foothold refused): rather than a failed cycle
+    that leaves the plan, the plan's own step, corrected (8.4), is held to the 20 mm the
+    plan's path samples keep; short_plan's second step (24 mm, under the fallback's usual
+    25 mm) runs so, landing on the plan's foothold."""
+    from planner.local.base import LocalPlanner
+
+    real = LocalPlanner.step
+
+    def step(self, state, leg, tau, step_m, shrink=None, target_W=None, try_others=True, **kw):
+        out = real(self, state, leg, tau, step_m, shrink, target_W, try_others, **kw)
+        out.ok, out.moved, out.end, out.phase = False, None, None, "foot_placement"
+        out.diagnosis = "refused by the test"
+        return out
+
+    monkeypatch.setattr(LocalPlanner, "step", step)
+    res = run_feedback(short_plan, max_cycles=4, plan_steps_first=False)
+    m, fb = res.metrics, res.executed.stats["feedback"]
+    assert fb["steps"] == fb["plan_steps_corrected"] == 4, fb
+    assert not (m.fell or m.tipped), m.summary()
+    last_resort = [f["cycle"] for f in fb["planner_failures"] if "20 mm" in f["why"]]
+    assert last_resort == [2], fb["planner_failures"]
+    kfs = res.executed.keyframes
+    for k, (leg, foot) in enumerate(planned_steps(short_plan)[:3]):
+        assert np.linalg.norm(kfs[k + 1].feet[leg][:2] - foot[:2]) < 0.015, k
+
+
 def test_feedback_follows_the_plans_footholds(short_plan):
     """From the measured state, each step is re-planned onto the plan's own foothold."""
     res = run_feedback(short_plan, max_cycles=4, plan_steps_first=False)
@@ -612,6 +641,49 @@ def test_a_correction_turns_the_body_from_its_measured_attitude(short_plan):
     np.testing.assert_allclose(q[lift - 1 :, 3:7], q_plan[lift - 1 :, 3:7], atol=1e-12)
     for k in range(lift):  # the corrected joints keep the stance feet where they stand
         np.testing.assert_allclose(_foot_centres(robot, q[k]), centres[k], atol=1e-6)
+
+
+def test_a_correction_moves_the_body_toward_a_foot_out_of_reach(short_plan, monkeypatch):
+    """8.4 from a stance foot measured 36 mm behind the plan's (FR, in the cycle where HR
+    swings): the plan's body, shifted by the feet's mean offset, leaves FR out of reach
+    (barrier9cm's recursive plan, HR stretched: refused, the walk left the plan and
+    stalled). The corrected body moves toward it by one offset (at most REACH_SHIFT_M),
+    taken on over the four-feet phase from the measured pose, and FK of the corrected
+    joints puts the stance feet on their measured centres plus the plan's rolling."""
+    import planner.execution as execution
+    from planner.execution import REACH_SHIFT_M, _foot_centres, correct_cycle
+    from planner.kinematics import kinematics_of
+    from planner.lie import rotation_from_quat
+
+    robot, s = short_plan.load_robot(), short_plan.samples
+    kin = kinematics_of(robot)
+    cycles = plan_step_cycles(short_plan)
+    (a, b), leg = cycles[2], 1
+    q_plan, contact = s.q[a : b + 1], s.contact[a : b + 1]
+    assert contact[:, leg].all() and not contact[:, 3].all()  # FR stands while HR swings
+    centres = short_plan.foot_centres_W()[a : b + 1]
+    R0, joints = rotation_from_quat(q_plan[0, 3:7]), robot.joints_from_q(q_plan[0]).copy()
+    ik = kin.ik_leg(leg, R0.T @ (centres[0, leg] - [0.036, 0.0, 0.0] - q_plan[0, :3]))
+    assert ik.reachable  # the measured robot stands so
+    joints[leg] = ik.joints_rad
+    meas = Measurement(0.0, robot.q_from(q_plan[0, :3], q_plan[0, 3:7], joints), np.ones(4, bool))
+    times = s.time[a : b + 1]
+    monkeypatch.setattr(execution, "REACH_SHIFT_M", 0.0)
+    q_plain, plain_misses = correct_cycle(robot, q_plan, contact, centres, meas, times)
+    monkeypatch.undo()
+    q, misses = correct_cycle(robot, q_plan, contact, centres, meas, times)
+    assert plain_misses > 0 and misses == 0, (plain_misses, misses)
+    shift = q[:, :3] - q_plain[:, :3]
+    np.testing.assert_allclose(shift[0], 0.0, atol=1e-12)  # starts at the measured base
+    lift = int(np.flatnonzero(~contact.all(axis=1))[0])
+    np.testing.assert_allclose(shift[lift - 1 :] - shift[-1], 0.0, atol=1e-12)  # then one offset
+    assert 0.0 < np.linalg.norm(shift[-1]) <= REACH_SHIFT_M + 1e-12
+    c_meas = _foot_centres(robot, meas.q)
+    for k in range(len(q)):
+        got = _foot_centres(robot, q[k])
+        for i in np.flatnonzero(contact.all(axis=0)):  # the legs that stand all cycle
+            want = centres[k, i] + c_meas[i] - centres[0, i]
+            np.testing.assert_allclose(got[i], want, atol=1e-6, err_msg=f"sample {k} leg {i}")
 
 
 def test_a_corrected_swing_keeps_the_plans_joints_where_ik_leaves_them(short_plan, monkeypatch):
