@@ -349,30 +349,31 @@ def run_feedback(
     steps (:func:`planned_steps`), each from the measured state: the soft planner (section
     8.2, ``local_settings``) plans the cycle (:meth:`planner.local.base.LocalPlanner.step`)
     onto the plan's foothold, with the body nearer the support's incentre if need be,
-    Theta2 also started from the plan's own body pose; where no body move reaches the
-    plan's foothold, the plan's own step is executed, corrected from the measured state as
-    in 8.4 (:func:`correct_cycle`; gen:14's trailing hind leg at a 7 cm step up), if the
+    Theta2 also started from the plan's own body pose; where that step fails, the plan's
+    own step is executed, corrected from the measured state as in 8.4
+    (:func:`correct_cycle`; gen:14's trailing hind leg at a 7 cm step up), if the
     corrected step passes the gates of :func:`_follow_corrected` (reach, balance, leg
-    links) and ``correct_plan_steps``. With ``plan_steps_first`` the corrected plan step
-    comes first, wherever its gates pass: the plan's body poses were looked ahead (8.5's
-    windows), and step10cm's and mix4m's recursive plans, whose steps re-planned from
-    states a few millimetres off stalled 1.3 m and 1.2 m short, reach so; barrier75mm's
-    recursive plan falls so at 28 s and reaches with the default. The outcomes at such
-    barriers flip with one step's difference (chaotic); neither order wins everywhere
+    links) and ``correct_plan_steps``; where no step planned anew is found at all, not
+    even a shorter one, its balance gate asks only the plan's path samples' margin
+    (barrier9cm's recursive plan: HR's step at its reach limit). With
+    ``plan_steps_first`` the corrected plan step comes first, wherever its gates pass:
+    the plan's body poses were looked ahead (8.5's windows), and step10cm's and mix4m's
+    recursive plans, whose steps re-planned from states a few millimetres off stalled
+    1.3 m and 1.2 m short, reach so; barrier75mm's recursive plan falls so at 28 s and
+    reaches with the default. The outcomes at such barriers flip with one step's
+    difference (chaotic); neither order wins everywhere
     (``bench/results/physics_recursive.md``). After ``GUIDE_FAILS`` failed cycles in a
-    row the rest of
+    row, or a failure after half of ``no_progress_cycles`` without progress, the rest of
     the walk is planned anew from the measured state (:func:`replan_rest`, at most
-    ``REPLANS`` times) and its steps are followed when it reaches the goal; after that, or
-    past the plan's last step, the gait queue and Lambda_t take over. Measurements come
-    from
-    ``source`` (default:
+    ``REPLANS`` times, also once the plan's steps were left) and its steps are followed
+    when it reaches the goal; else, or past the plan's last step, the gait queue and
+    Lambda_t take over. Measurements come from ``source`` (default:
     :class:`SimulatedMocap` of the simulator with ``noise``: position_noise_m,
     angle_noise_rad, joint_noise_rad, latency_s, seed). Stops at the goal, after
     ``max_cycles`` (default: twice the plan's cycles plus 20), after ``max_fails_in_row``
     failed cycles in a row (a cycle fails when every ``BACKOFF`` attempt of its leg
     fails: shorter steps, body nearer the support's incentre), when the COM has not come
-    1 cm closer to the goal in
-    ``no_progress_cycles`` cycles, or on a fall.
+    1 cm closer to the goal in ``no_progress_cycles`` cycles, or on a fall.
     """
     from planner import stability
     from planner.local.base import ARRIVAL_M
@@ -398,6 +399,7 @@ def run_feedback(
     s_plan, centres = plan.samples, plan.foot_centres_W()
     step_scale = {i: 1.0 for i in range(4)}
     fails, cycles, steps, best, best_at, arrivals = 0, 0, 0, math.inf, 0, 0
+    replanned_at = 0  # the cycle of the last re-plan
     replans = []  # the re-plans made (8.3): their steps, reaching or not
     m = ex.monitor.metrics
     try:
@@ -522,10 +524,14 @@ def run_feedback(
                     step_scale[leg] = max(step_scale[leg] * 0.5, st.min_step_fraction)
                 fails += 1
                 new = None
-                if guided and fails >= GUIDE_FAILS and len(replans) < REPLANS:
-                    # the plan's steps no longer fit: the rest of the walk planned anew
+                # the plan's steps no longer fit, the gait queue's fail, or failures come
+                # between steps that bring the COM no nearer the goal (a livelock that
+                # never fails GUIDE_FAILS times in a row): the rest planned anew
+                stalled = cycles - max(best_at, replanned_at) >= no_progress_cycles // 2
+                if (fails >= GUIDE_FAILS or stalled) and len(replans) < REPLANS:
                     new = replan_rest(robot, terrain, plan.friction, st, state, goal, tau)
                     replans.append(0 if new is None else len(planned_steps(new)))
+                    replanned_at = cycles
                 if new is not None:
                     guide, guide_poses = planned_steps(new), planned_body_poses(new)
                     guide_knees = planned_knees(new)

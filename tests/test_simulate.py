@@ -558,6 +558,40 @@ def test_feedback_replans_the_rest_when_the_plans_steps_fail(short_plan, monkeyp
         assert np.linalg.norm(landed[:2] - foot[:2]) < 0.015, (k, landed, foot)
 
 
+def test_feedback_replans_again_once_the_plans_steps_were_left(short_plan, monkeypatch):
+    """The first re-plan stops short (None): the plan's steps are left and the gait queue
+    steps; when its steps fail too, the rest is planned anew once more (REPLANS = 2; the
+    second was never used: barrier9cm's recursive plan stalled 127 cm short so) and the
+    walk follows that plan's steps."""
+    import planner.execution as execution
+    from planner.local.base import LocalPlanner
+
+    real_step, real_replan = LocalPlanner.step, execution.replan_rest
+    made = []
+
+    def step(self, *args, **kw):
+        out = real_step(self, *args, **kw)
+        if len(made) < 2:  # refused until the second re-plan
+            out.ok, out.moved, out.end, out.phase = False, None, None, "body_move"
+            out.diagnosis = "refused by the test"
+        return out
+
+    def replan(*args):
+        made.append(None)  # (the re-plan's own steps are not refused)
+        if len(made) == 2:
+            made[-1] = real_replan(*args)
+        return made[-1]
+
+    monkeypatch.setattr(LocalPlanner, "step", step)
+    monkeypatch.setattr(execution, "replan_rest", replan)
+    res = run_feedback(short_plan, max_cycles=6, correct_plan_steps=False)
+    m, fb = res.metrics, res.executed.stats["feedback"]
+    assert len(made) == 2 and made[1] is not None, made
+    assert fb["replans"] == [0, len(planned_steps(made[1]))], fb
+    assert fb["steps"] == 3 and fb["plan_steps_followed"] == 3, fb  # cycles 4-6
+    assert not (m.fell or m.tipped), m.summary()
+
+
 def test_a_replan_is_followed_only_when_it_reaches_the_goal(short_plan, monkeypatch):
     """replan_rest plans from a given state to the goal; where the soft planner stops short
     the recursive one is asked; a re-plan that stops short (its own dead end) is not
