@@ -295,23 +295,29 @@ def test_plan_step_cycles_hold_each_planned_swing(short_plan):
         assert list(lifted) == [leg]
 
 
-def test_feedback_falls_back_on_the_plans_step_corrected(short_plan, monkeypatch):
-    """No body move from the measured state reaches the plan's foothold: the plan's own step,
-    corrected from the measurement (8.4), carries the walk on, landing on that foothold;
-    where the corrected step keeps less than 25 mm of balance margin (short_plan's second
-    step lifts with 24 mm) it is refused and the step is planned anew."""
+def refuse_steps(monkeypatch, phase: str, plans_foothold_only: bool) -> None:
+    """Every step planned anew fails in ``phase`` (only those onto a given foothold, the
+    plan's, with ``plans_foothold_only``), nothing moved."""
     from planner.local.base import LocalPlanner
 
     real = LocalPlanner.step
 
     def step(self, state, leg, tau, step_m, shrink=None, target_W=None, try_others=True, **kw):
         out = real(self, state, leg, tau, step_m, shrink, target_W, try_others, **kw)
-        if target_W is not None:  # the plan's foothold: refused
-            out.ok, out.moved, out.end, out.phase = False, None, None, "body_move"
+        if target_W is not None or not plans_foothold_only:
+            out.ok, out.moved, out.end, out.phase = False, None, None, phase
             out.diagnosis = "refused by the test"
         return out
 
     monkeypatch.setattr(LocalPlanner, "step", step)
+
+
+def test_feedback_falls_back_on_the_plans_step_corrected(short_plan, monkeypatch):
+    """No body move from the measured state reaches the plan's foothold: the plan's own step,
+    corrected from the measurement (8.4), carries the walk on, landing on that foothold;
+    where the corrected step keeps less than 25 mm of balance margin (short_plan's second
+    step lifts with 24 mm) it is refused and the step is planned anew."""
+    refuse_steps(monkeypatch, "body_move", plans_foothold_only=True)
     res = run_feedback(short_plan, max_cycles=4, plan_steps_first=False)
     m, fb = res.metrics, res.executed.stats["feedback"]
     assert fb["steps"] == 4 and m.ik_misses == 0, m.summary()
@@ -332,17 +338,7 @@ def test_feedback_takes_the_plans_step_at_the_path_margin_when_nothing_else_step
     that leaves the plan, the plan's own step, corrected (8.4), is held to the 20 mm the
     plan's path samples keep; short_plan's second step (24 mm, under the fallback's usual
     25 mm) runs so, landing on the plan's foothold."""
-    from planner.local.base import LocalPlanner
-
-    real = LocalPlanner.step
-
-    def step(self, state, leg, tau, step_m, shrink=None, target_W=None, try_others=True, **kw):
-        out = real(self, state, leg, tau, step_m, shrink, target_W, try_others, **kw)
-        out.ok, out.moved, out.end, out.phase = False, None, None, "foot_placement"
-        out.diagnosis = "refused by the test"
-        return out
-
-    monkeypatch.setattr(LocalPlanner, "step", step)
+    refuse_steps(monkeypatch, "foot_placement", plans_foothold_only=False)
     res = run_feedback(short_plan, max_cycles=4, plan_steps_first=False)
     m, fb = res.metrics, res.executed.stats["feedback"]
     assert fb["steps"] == fb["plan_steps_corrected"] == 4, fb
