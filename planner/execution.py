@@ -402,6 +402,14 @@ def run_feedback(
     replanned_at = 0  # the cycle of the last re-plan
     replans = []  # the re-plans made (8.3): their steps, reaching or not
     m = ex.monitor.metrics
+
+    def plan_step_corrected(meas, g: int, balance_m=None, refused=None):
+        """The guide's step g, corrected from ``meas`` and executed (:func:`_follow_corrected`)."""
+        cycle = guide_cycles[g]  # of the guide in force (a re-plan's once followed)
+        return _follow_corrected(
+            ex, meas, robot, terrain, s_plan, centres, *cycle, sim, local, refused, balance_m
+        )
+
     try:
         while True:
             meas = src.measure()
@@ -446,15 +454,12 @@ def run_feedback(
             step, on_plan, ran = None, False, None
             # the plan's own step, corrected from the measured state (8.4), where its gates
             # pass: first with plan_steps_first (the plan's body poses were looked ahead),
-            # else where no body move planned anew reaches the plan's foothold (a hind leg
-            # stretched behind a step up); one try per cycle, from this measurement
+            # else where no step planned anew reaches the plan's foothold (a hind leg
+            # stretched behind a step up), from this measurement
             may_correct = guided and guide_cycles is not None
             refused: list[str] = []
             if may_correct and plan_steps_first:
-                ran = _follow_corrected(
-                    ex, meas, robot, terrain, s_plan, centres, *guide_cycles[g], sim, local,
-                    refused,
-                )  # fmt: skip
+                ran = plan_step_corrected(meas, g, refused=refused)
                 if refused:
                     local._log_failure(cycles, leg, "corrected_step", state, refused[-1])
             if guided and ran is None:  # the plan's foothold, from a body ever nearer the incentre
@@ -467,9 +472,7 @@ def run_feedback(
                         on_plan = True
                         break
                 if may_correct and not plan_steps_first and not step.ok:
-                    ran = _follow_corrected(
-                        ex, meas, robot, terrain, s_plan, centres, *guide_cycles[g], sim, local
-                    )
+                    ran = plan_step_corrected(meas, g)
                     if ran is not None:
                         why = f"{step.diagnosis}; executed the plan's step, corrected (8.4)"
                         local._log_failure(cycles, leg, step.phase, state, why)
@@ -489,15 +492,11 @@ def run_feedback(
                     # (barrier9cm's recursive plan: HR's step at its reach limit, 22.5 mm
                     # in the plan, 23.8 mm corrected; refused, the robot left the plan
                     # and stalled 127 cm short)
-                    ran = _follow_corrected(
-                        ex, meas, robot, terrain, s_plan, centres, *guide_cycles[g], sim, local,
-                        balance_m=stability.PATH_BALANCE_MARGIN_M,
-                    )  # fmt: skip
+                    margin_m = stability.PATH_BALANCE_MARGIN_M
+                    ran = plan_step_corrected(meas, g, balance_m=margin_m)
                     if ran is not None:
                         why = f"{step.diagnosis}; executed the plan's step, corrected (8.4), "
-                        why += (
-                            f"{stability.PATH_BALANCE_MARGIN_M * 1000:.0f} mm inside its supports"
-                        )
+                        why += f"{margin_m * 1000:.0f} mm inside its supports"
                         local._log_failure(cycles, leg, step.phase, state, why)
             if ran is not None:
                 g, fails, steps, corrected = g + 1, 0, steps + 1, corrected + 1
@@ -657,7 +656,7 @@ def correct_cycle(
     for k in range(n):
         w = 1.0 - min(float(clock[k] - clock[0]) / span, 1.0) if k_end > 0 else 0.0
         R = rotation_from_vector(w * rot_err) @ rotation_from_quat(plan_q[k, 3:7])
-        poses.append((plan_q[k, :3] + d + w * pos_err, R, w))
+        poses.append((plan_q[k, :3] + d + w * pos_err, R, w, robot.joints_from_q(plan_q[k])))
         for i in range(4):
             if lift[i] is None or k <= lift[i][0]:  # measured start + the planned rolling
                 targets[k, i] = plan_centres[k, i] + (c_meas[i] - plan_centres[0, i])
@@ -672,9 +671,8 @@ def correct_cycle(
     def corrected(shift_W):
         """(q (n, 19), reach misses (n, 4, 3)) with the body shifted by ``shift_W``."""
         q, miss = plan_q.copy(), np.zeros((n, 4, 3))
-        for k, (p, R, w) in enumerate(poses):
+        for k, (p, R, w, ref) in enumerate(poses):
             p = p + (1.0 - w) * shift_W  # the shift grows as the measured error fades
-            ref = robot.joints_from_q(plan_q[k])
             joints, miss[k] = _corrected_legs(kin, p, R, targets[k], ref, swinging[k])
             q[k] = robot.q_from(p, quat_from_rotation(R) if w > 0.0 else plan_q[k, 3:7], joints)
         return q, miss
@@ -685,10 +683,11 @@ def correct_cycle(
     shift = np.zeros(3)
     out, miss = corrected(shift)
     for _ in range(REACH_SHIFTS):
+        if not miss.any():
+            break
         total = miss.sum(axis=1)  # (n, 3): each sample's pull on the body
-        worst = int(np.argmax(np.linalg.norm(total, axis=1)))
-        trial = shift + total[worst]
-        if not miss.any() or np.linalg.norm(trial) > REACH_SHIFT_M:
+        trial = shift + total[int(np.argmax(np.linalg.norm(total, axis=1)))]
+        if np.linalg.norm(trial) > REACH_SHIFT_M:
             break
         q_t, miss_t = corrected(trial)
         if _misses(miss_t) >= _misses(miss):
