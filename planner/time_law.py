@@ -14,6 +14,9 @@ every sample interval the least duration under
   spare (:func:`carried_accel_m_s2`: the quasi-static check of section 6 with gravity
   g - a u, so the motion stays quasi-static in the sense that matters), and
   :data:`FOOT_ACCEL_M_S2`, which lets the servos follow a swing;
+- near the terrain, the body's speed at most its clearance to spare over the time it lags
+  (:func:`near_terrain_caps`): MuJoCo's body trails and overshoots a fast move, and over
+  an edge that error is the margin;
 - rest at both ends: every keyframe is a static equilibrium (section 6). A swing may
   start before its body move has come to rest (:mod:`planner.local.overlap`); the body
   still rests on its Theta2 pose when the foot lands.
@@ -42,6 +45,8 @@ __all__ = [
     "rest_to_rest_durations_s",
     "rest_to_rest_profile",
     "carried_accel_m_s2",
+    "near_terrain_caps",
+    "BODY_LAG_S",
     "JOINT_SPEED_FRACTION",
     "OVER_EDGE_SPEED_FRACTION",
 ]
@@ -66,6 +71,15 @@ CARRIED_SHARE = 0.5  # a body move's inertia may use at most this share of a sam
 # everywhere; its one body move whose margin halves below 1 m/s^2 is where it slid)
 ACCEL_FLOOR_M_S2 = 0.05  # ... but a sample at the cone's edge may still move slowly
 MIN_INTERVAL_S = 1e-4  # no interval is shorter (repeated samples) [s]
+# the executed body is off its path by up to its speed x this [s] (x sqrt(s)) in MuJoCo:
+# barrier9cm's soft plan moved its body 3.3 cm back at up to 0.13 m/s with its underside
+# 16 mm over the barrier's edge; the body overshot by 15 mm and 4 degrees as it braked
+# (joints within 1.7 degrees of their set-points), its underside came down on the edge and
+# the robot fell, open loop and with feedback. Capping the speed at the clearance to spare
+# over 0.1 s of lag still fell, over 0.2 s held (5.6 cm off the end open loop), 0.3 s
+# reached (0.8 cm), as did the whole plan at time scale 1.5
+BODY_LAG_S = 0.3
+LEAST_SPARE_M = 0.002  # a body already nearer than its margin still moves, slowly
 
 
 def rest_to_rest_durations_s(lengths: _Array, caps: _Array, accel) -> _Array:
@@ -112,6 +126,19 @@ def rest_to_rest_profile(lengths: _Array, caps: _Array, accel) -> tuple[_Array, 
     return np.maximum(dt, MIN_INTERVAL_S), a_k
 
 
+def near_terrain_caps(clearance_m: _Array, margin_m: float, lag_s: float) -> _Array:
+    """Speed caps [m/s] of body intervals ``clearance_m`` [m] over the sharp terrain.
+
+    An interval whose body (its bottom face, the least over its two samples) is c above
+    the terrain goes at most (c - ``margin_m``) / ``lag_s``, at least ``LEAST_SPARE_M`` /
+    ``lag_s``: the clearance the path keeps beyond its margin is what the executed body's
+    lag behind and overshoot of a fast move may use (:data:`BODY_LAG_S`). High above the
+    terrain the cap exceeds any body speed.
+    """
+    c = np.asarray(clearance_m, float)
+    return np.maximum(c - margin_m, LEAST_SPARE_M) / lag_s
+
+
 def carried_accel_m_s2(margin_n, cap_m_s2: float, need_n: float, iters: int = 6) -> float:
     """The largest acceleration in [floor, cap] [m/s^2] whose balance margin stays >= ``need_n``.
 
@@ -154,7 +181,7 @@ def body_profile(
     rotations_W: Sequence[_Array],
     joints_rad: _Array,
     *,
-    speed_m_s: float,
+    speed_m_s,
     accel_m_s2,
     arm_m: float,
     vmax_rad_s: _Array | None,
@@ -164,7 +191,8 @@ def body_profile(
 
     Samples: base positions (N, 3) and rotations. The path coordinate is the base's
     travel, a turn counting as the travel of a point ``arm_m`` from the base (a hip):
-    l_k = max(|dp_k|, arm |d phi_k|). ``accel_m_s2``: one bound, or (K,) per interval.
+    l_k = max(|dp_k|, arm |d phi_k|). ``speed_m_s`` and ``accel_m_s2``: one bound, or
+    (K,) per interval.
     """
     p = np.asarray(positions_W, float)
     if len(p) < 2:
@@ -174,7 +202,8 @@ def body_profile(
     turn = np.array([_angle(a, b) for a, b in zip(R[:-1], R[1:], strict=True)])
     ell = np.maximum(np.maximum(dp, arm_m * turn), 1e-9)
     caps = np.minimum(
-        np.full(len(ell), speed_m_s), _joint_caps(joints_rad, ell, vmax_rad_s, fraction)
+        np.broadcast_to(np.asarray(speed_m_s, float), ell.shape),
+        _joint_caps(joints_rad, ell, vmax_rad_s, fraction),
     )
     return rest_to_rest_profile(ell, caps, accel_m_s2)
 

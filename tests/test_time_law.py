@@ -281,3 +281,58 @@ def test_a_move_braking_toward_an_edge_keeps_the_zero_moment_point_inside(little
             floor = min(rest, max(CARRIED_SHARE * rest, PATH_BALANCE_MARGIN_M))
             zmp = com[j] - h * a * u / 9.81
             assert polygon_margin_m(feet, zmp) >= floor - 2e-4, (k, j)
+
+
+def test_a_body_move_over_an_edge_goes_no_faster_than_its_clearance_allows(littledog):
+    """The same body path over flat ground and with a barrier under its belly whose top
+    is 9 mm below the body's lowest point: over the barrier the move takes longer, and in
+    every interval the base's mean speed is at most the clearance beyond BODY_CLEARANCE_M
+    over BODY_LAG_S (the clearance measured here on a 1 mm grid of the body box's bottom
+    face); over flat ground the clearance is ample and the law is the plain one."""
+    from planner.local.base import BODY_CLEARANCE_M
+    from planner.local.soft import SoftPlanner
+    from planner.terrain import Terrain, load_terrain
+    from planner.time_law import BODY_LAG_S
+    from planner.trajectory import Trajectory
+
+    flat = load_terrain("flat")
+    planner = SoftPlanner(littledog, flat)
+    tau = Trajectory.straight((0.2, 0.0), (0.6, 0.0), flat, planner.com_height_m())
+    state = planner.initial_state((0.2, 0.0), tau)
+    step = planner.step(state, 2, tau, planner.stride_m())
+    assert step.moved is not None, step.diagnosis
+    path = step.body_path
+    lo, hi = littledog.body_box_B
+    gx, gy = np.meshgrid(
+        np.arange(lo[0], hi[0] + 1e-9, 0.001), np.arange(lo[1], hi[1] + 1e-9, 0.001)
+    )
+    bottom_B = np.column_stack([gx.ravel(), gy.ravel(), np.full(gx.size, lo[2])])
+    bottoms = [bottom_B @ s.base_rotation_W.T + s.base_position_W for s in path]
+    mid = path[len(path) // 2].base_position_W
+    top = min(float(b[:, 2].min()) for b in bottoms) - 0.009
+    barrier = Terrain.from_spec(
+        {
+            "name": "b",
+            "friction": 0.7,
+            "x_min": -0.5,
+            "length": 2.0,
+            "kind": "barrier",
+            "x": float(mid[0]) - 0.015,
+            "height": top,
+            "thickness": 0.03,
+        }  # fmt: skip
+    )
+    t_flat = planner.body_offsets_s(path)
+    over = SoftPlanner(littledog, barrier)
+    t_over = over.body_offsets_s(path)
+    assert t_over[-1] > 1.2 * t_flat[-1]
+    gaps = np.array(
+        [float((b[:, 2] - barrier.height_sharp(b[:, 0], b[:, 1])).min()) for b in bottoms]
+    )
+    assert 0.0085 < gaps.min() < 0.0095
+    p = np.array([s.base_position_W for s in path])
+    speed = np.linalg.norm(np.diff(p, axis=0), axis=1) / np.diff(np.concatenate([[0.0], t_over]))
+    allowed = (np.minimum(gaps[:-1], gaps[1:]) - BODY_CLEARANCE_M) / BODY_LAG_S
+    assert np.all(speed <= allowed * (1 + 1e-6) + 1e-6)
+    flat_gaps = np.array([float(b[:, 2].min()) for b in bottoms])
+    assert flat_gaps.min() > BODY_CLEARANCE_M + BODY_LAG_S * planner.settings.body_speed_m_s

@@ -968,6 +968,16 @@ class LocalPlanner:
             return None
         return _with_leg_joints(touch, leg, joints)
 
+    def _body_gap_map_m(self, path: list[State]) -> NDArray[np.float64]:
+        """(N, K) heights [m] of the body's bottom-face points over the sharp terrain."""
+        pts_B = self._bottom_B
+        pts = np.array([pts_B @ s.base_rotation_W.T + s.base_position_W for s in path])
+        return pts[..., 2] - np.asarray(self.terrain.height_sharp(pts[..., 0], pts[..., 1]))
+
+    def body_gaps_m(self, path: list[State]) -> NDArray[np.float64]:
+        """(N,) least height [m] of the body's bottom face over the sharp terrain per sample."""
+        return self._body_gap_map_m(path).min(axis=1)
+
     def path_problem(self, path: list[State]) -> str:
         """Why a sampled leaf path is not executable, or "": reach and balance per sample.
 
@@ -1002,9 +1012,7 @@ class LocalPlanner:
                 legs = ", ".join(LEG_NAMES[i] for i in s.info.get("unreachable_legs", []))
                 return f"sample {k} of the path leaves the reach of {legs or 'a leg'}"
             miss = 0.0
-        pts_B = self._bottom_B
-        pts = np.array([pts_B @ s.base_rotation_W.T + s.base_position_W for s in path])
-        gaps = pts[..., 2] - np.asarray(self.terrain.height_sharp(pts[..., 0], pts[..., 1]))
+        gaps = self._body_gap_map_m(path)
         # a measured start may lack the margin: the path must not lose more
         body_floor = max(min(BODY_CLEARANCE_M, float(gaps[0].min()) - START_SLACK_M), 0.0)
         for k, gap in enumerate(gaps):
@@ -1688,13 +1696,25 @@ class LocalPlanner:
         The base accelerates at most ``body_accel_m_s2``, less where the stance cannot
         carry the inertial force with ``CARRIED_SHARE`` of its friction-cone margin to
         spare (:meth:`_carried_margin_N`); each interval is checked at its bound in the
-        direction the law accelerates it, again if the law changes.
+        direction the law accelerates it, again if the law changes. Near the sharp terrain
+        it goes at most its clearance beyond ``BODY_CLEARANCE_M`` over
+        ``BODY_LAG_S`` x sqrt(s) (:func:`planner.time_law.near_terrain_caps`).
         """
-        from planner.time_law import body_profile, carried_accel_m_s2
+        from planner.robot_scale import time_scale
+        from planner.time_law import BODY_LAG_S, body_profile, carried_accel_m_s2, near_terrain_caps
 
         if len(path) < 2:
             return np.zeros(0)
         st = self.settings
+        gaps = self.body_gaps_m(path)
+        speed = np.minimum(
+            st.body_speed_m_s,
+            near_terrain_caps(
+                np.minimum(gaps[:-1], gaps[1:]),
+                BODY_CLEARANCE_M,
+                BODY_LAG_S * time_scale(self.robot),
+            ),
+        )
         accel = st.body_accel_m_s2
         if st.level_body_accel_m_s2 is not None and self.level_under(path[0]):
             accel = st.level_body_accel_m_s2
@@ -1706,7 +1726,7 @@ class LocalPlanner:
                 np.array([s.base_position_W for s in path]),
                 [s.base_rotation_W for s in path],
                 np.array([s.joints_rad.ravel() for s in path]),
-                speed_m_s=st.body_speed_m_s,
+                speed_m_s=speed,
                 accel_m_s2=bound,
                 arm_m=self._hip_arm_m(),
                 vmax_rad_s=self._joint_speed_limits(),
