@@ -968,15 +968,11 @@ class LocalPlanner:
             return None
         return _with_leg_joints(touch, leg, joints)
 
-    def _body_gap_map_m(self, path: list[State]) -> NDArray[np.float64]:
+    def _body_gaps_m(self, path: list[State]) -> NDArray[np.float64]:
         """(N, K) heights [m] of the body's bottom-face points over the sharp terrain."""
         pts_B = self._bottom_B
         pts = np.array([pts_B @ s.base_rotation_W.T + s.base_position_W for s in path])
         return pts[..., 2] - np.asarray(self.terrain.height_sharp(pts[..., 0], pts[..., 1]))
-
-    def body_gaps_m(self, path: list[State]) -> NDArray[np.float64]:
-        """(N,) least height [m] of the body's bottom face over the sharp terrain per sample."""
-        return self._body_gap_map_m(path).min(axis=1)
 
     def path_problem(self, path: list[State]) -> str:
         """Why a sampled leaf path is not executable, or "": reach and balance per sample.
@@ -1012,7 +1008,7 @@ class LocalPlanner:
                 legs = ", ".join(LEG_NAMES[i] for i in s.info.get("unreachable_legs", []))
                 return f"sample {k} of the path leaves the reach of {legs or 'a leg'}"
             miss = 0.0
-        gaps = self._body_gap_map_m(path)
+        gaps = self._body_gaps_m(path)
         # a measured start may lack the margin: the path must not lose more
         body_floor = max(min(BODY_CLEARANCE_M, float(gaps[0].min()) - START_SLACK_M), 0.0)
         for k, gap in enumerate(gaps):
@@ -1706,7 +1702,7 @@ class LocalPlanner:
         if len(path) < 2:
             return np.zeros(0)
         st = self.settings
-        gaps = self.body_gaps_m(path)
+        gaps = self._body_gaps_m(path).min(axis=1)
         speed = np.minimum(
             st.body_speed_m_s,
             near_terrain_caps(
