@@ -4,12 +4,12 @@ import numpy as np
 import pytest
 
 # make test runs a planning process per core (pytest -n auto): each plans without the
-# overlap worker (planner.local.prefetch), which would only add a process per core (825 s
+# overlap worker (planner.planning.prefetch), which would only add a process per core (825 s
 # against 763 s for the suite, 2 cores); the worker's own tests turn it on
 if int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")) >= (os.cpu_count() or 1):
     os.environ.setdefault("STRATAWALK_OVERLAP_WORKER", "0")
 
-from planner.robot import load_robot
+from planner.body.robot import load_robot
 
 
 @pytest.fixture(scope="session")
@@ -26,10 +26,10 @@ def rng():
 def short_flat_walk(tmp_path_factory):
     """A short validated walk on flat ground (two crawl steps), saved; its path, the plan
     loaded back from the file, and its series (shared by the replay and plot tests)."""
-    from planner.local.base import LocalSettings
-    from planner.plan import Plan
-    from planner.plots import plan_series
-    from planner.walk import plan_walk
+    from planner.planfile.plan import Plan
+    from planner.planning.local import LocalSettings
+    from planner.planning.walk import plan_walk
+    from planner.replay.plots import plan_series
 
     plan, report = plan_walk("littledog", "flat", (0.3, 0.0), (0.2, 0.0), "soft", LocalSettings())
     assert report.ok, report.summary()

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from planner.cli import main
+from planner.cli.main import main
 
 LITTLEDOG_URDF = Path(__file__).parents[1] / "models" / "littledog" / "littledog.urdf"
 
@@ -217,7 +217,7 @@ def _port_free(port):
 def test_sigterm_to_replay_stops_its_server(short_flat_walk):
     path, _, _ = short_flat_walk
     proc = subprocess.Popen(
-        [sys.executable, "-m", "planner.cli", "replay", str(path), "--geometry", "collision"],
+        [sys.executable, "-m", "planner.cli.main", "replay", str(path), "--geometry", "collision"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
     )  # fmt: skip
     try:
@@ -245,7 +245,7 @@ def test_sigterm_to_replay_stops_its_server(short_flat_walk):
 def _start(args, **kw):
     """A ``stratawalk`` subprocess in its own session (so nothing it starts can escape)."""
     return subprocess.Popen(
-        [sys.executable, "-m", "planner.cli", *args],
+        [sys.executable, "-m", "planner.cli.main", *args],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True, **kw,
     )  # fmt: skip
 
@@ -282,7 +282,7 @@ def _running_in_session(sid):
 
 
 def test_two_ctrl_c_during_a_batch_keep_the_records(tmp_path):
-    from planner.batch import read_results
+    from planner.bench.batch import read_results
 
     scen = tmp_path / "scenarios.yaml"
     jobs = "".join(f"  - {{goal: [{0.3 + 0.02 * i:.2f}, 0.0]}}\n" for i in range(12))
@@ -306,8 +306,8 @@ def test_two_ctrl_c_during_a_batch_keep_the_records(tmp_path):
 
 
 def test_sigterm_to_plan_saves_the_plan_so_far(tmp_path):
-    from planner.plan import Plan
-    from planner.validate import check_plan
+    from planner.planfile.plan import Plan
+    from planner.planfile.validate import check_plan
 
     out = tmp_path / "partial.json"
     proc = _start(["plan", "--terrain", "flat", "--goal", "2.2,0", "--out", str(out)])
@@ -330,7 +330,7 @@ def test_sigterm_to_plan_saves_the_plan_so_far(tmp_path):
 
 
 def test_ctrl_c_during_simulate_keeps_the_motion(short_flat_walk, tmp_path):
-    from planner.plan import Plan
+    from planner.planfile.plan import Plan
 
     path, _, _ = short_flat_walk
     out = tmp_path / "exec.json"

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from planner.batch import job_id, load_scenarios, read_results, run_batch
-from planner.cli import main
+from planner.bench.batch import job_id, load_scenarios, read_results, run_batch
+from planner.cli.main import main
 
 ROOT = Path(__file__).resolve().parents[1]
 DETERMINISTIC = ("status", "reached", "validated", "steps", "distance_to_goal_m", "message")
@@ -214,7 +214,7 @@ def test_dask_cluster_gives_the_same_results_as_the_local_pool(tiny, tmp_path):
 
 
 def test_unreachable_scheduler_is_a_one_line_error(tiny, tmp_path):
-    from planner.errors import InputError
+    from planner.core.errors import InputError
 
     jobs, _, _ = tiny
     with pytest.raises(InputError, match="--scheduler tcp://127.0.0.1:9: cannot connect") as e:

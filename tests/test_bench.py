@@ -1,13 +1,13 @@
-"""The Theta benchmark (planner.bench): a tiny run, well-formed output, fair comparison."""
+"""The Theta benchmark (planner.bench.theta): a tiny run, well-formed output, fair comparison."""
 
 import json
 
 import numpy as np
 import pytest
 
-from planner import bench
+from planner.bench import theta as bench
 from planner.problems.base import FEASIBILITY_TOL
-from planner.terrain import load_terrain
+from planner.world.terrain import load_terrain
 
 
 @pytest.fixture(scope="module")

@@ -1,8 +1,8 @@
-"""The course table's jobs (planner.bench_courses): named and hard courses, their goals."""
+"""The course table's jobs (planner.bench.courses): named and hard courses, their goals."""
 
 import pytest
 
-from planner.bench_courses import (
+from planner.bench.courses import (
     BACKTRACK_COURSES,
     COURSES,
     GOAL_XY,
@@ -12,7 +12,7 @@ from planner.bench_courses import (
     expand_courses,
     goal_for,
 )
-from planner.terrain import load_terrain
+from planner.world.terrain import load_terrain
 
 
 def test_groups_expand_in_order_without_duplicates():
@@ -41,7 +41,7 @@ def test_jobs_carry_each_course_its_goal():
 def test_a_ladder_or_generated_course_walks_to_its_own_goal(course):
     """`bench courses --courses ladder` walked every feature course to (2.2, 0), off the
     shorter ones: each walks to the end of its feature segment, on the terrain."""
-    from planner.course_gen import course_goal_xy, course_spec
+    from planner.world.course_gen import course_goal_xy, course_spec
 
     goal = goal_for(course)
     assert goal == course_goal_xy(course_spec(course))
@@ -54,8 +54,8 @@ def test_a_ladder_or_generated_course_walks_to_its_own_goal(course):
 def test_the_table_counts_the_recursive_planners_backtracks():
     """A recursive job's record carries its backtracks and window retraces (8.5), and the
     table shows them; soft's shows its retraces (none on flat ground)."""
-    from planner.batch import run_job
-    from planner.bench_courses import _row, render_markdown
+    from planner.bench.batch import run_job
+    from planner.bench.courses import _row, render_markdown
 
     jobs = course_jobs(courses=("flat",), planners=("soft", "recursive"), time_budget_s=60.0)
     for job in jobs:

@@ -2,8 +2,8 @@ import json
 
 import pytest
 
-from planner.bench_courses import expand_courses
-from planner.bench_physics import (
+from planner.bench.courses import expand_courses
+from planner.bench.physics import (
     job_id,
     ladder_limits,
     physics_jobs,
@@ -13,9 +13,9 @@ from planner.bench_physics import (
     run_physics_job,
     summarize,
 )
-from planner.cli import main
-from planner.course_gen import ladder_course_names
-from planner.terrain import load_terrain
+from planner.cli.main import main
+from planner.world.course_gen import ladder_course_names
+from planner.world.terrain import load_terrain
 
 
 def _job(course, group, modes=("open", "feedback")):

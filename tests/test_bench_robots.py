@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from planner.bench_physics import job_id
-from planner.bench_robots import (
+from planner.bench.physics import job_id
+from planner.bench.robots import (
     RELIEF_FRACTION,
     STEP_FRACTION,
     WALK_M,
@@ -14,9 +14,9 @@ from planner.bench_robots import (
     robot_rows,
     summarize,
 )
-from planner.cli import main
-from planner.robot import load_robot
-from planner.terrain import Terrain
+from planner.body.robot import load_robot
+from planner.cli.main import main
+from planner.world.terrain import Terrain
 
 
 @pytest.mark.parametrize("name", ["littledog", "anymal"])

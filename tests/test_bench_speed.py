@@ -5,14 +5,14 @@ from types import SimpleNamespace
 
 import pytest
 
-from planner.bench_speed import profile_groups, run_speed_bench
-from planner.cli import main
+from planner.bench.speed import profile_groups, run_speed_bench
+from planner.cli.main import main
 
 
 def test_profile_groups_give_library_time_to_the_heaviest_caller():
     """Own time per module group; a builtin or library function counts for its heaviest
     caller's group (followed through library callers), and nothing is lost."""
-    terrain = ("/x/planner/terrain.py", 1, "height")
+    terrain = ("/x/planner/world/terrain.py", 1, "height")
     theta = ("/x/planner/problems/base.py", 2, "solve")
     wrapper = ("/lib/casadi/casadi.py", 3, "call")
     cos = ("~", 0, "<built-in method numpy.cos>")

@@ -1,7 +1,7 @@
 import subprocess
 import sys
 
-from planner.cli import main
+from planner.cli.main import main
 
 
 def test_robot_summary_prints_littledog(capsys):
@@ -13,7 +13,7 @@ def test_robot_summary_prints_littledog(capsys):
 def test_robot_list_names_every_loadable_robot_and_its_urdf(capsys):
     from pathlib import Path
 
-    from planner.robot import load_robot, robot_names
+    from planner.body.robot import load_robot, robot_names
 
     assert main(["robot", "--list"]) == 0
     lines = capsys.readouterr().out.strip().splitlines()[1:-1]  # header and footnote out
@@ -36,7 +36,7 @@ def test_robot_bad_path_is_one_line_error(capsys, tmp_path):
 
 def test_console_script_entry_point():
     out = subprocess.run(
-        [sys.executable, "-m", "planner.cli", "robot", "go1"],
+        [sys.executable, "-m", "planner.cli.main", "robot", "go1"],
         capture_output=True,
         text=True,
         check=True,
@@ -48,7 +48,7 @@ def test_the_help_loads_no_solver_nor_robot_library():
     """Issue 16: `stratawalk --help` and every sub-command's parser start without CasADi,
     Pinocchio, MuJoCo or SciPy (each sub-command imports what it runs)."""
     code = (
-        "import sys; from planner.cli import build_parser; build_parser(); "
+        "import sys; from planner.cli.main import build_parser; build_parser(); "
         "print(' '.join(m for m in ('casadi', 'pinocchio', 'mujoco', 'scipy') "
         "if m in sys.modules))"
     )

@@ -6,9 +6,9 @@ its own timing."""
 import numpy as np
 import pytest
 
-from planner.local.base import LocalSettings
-from planner.validate import check_plan
-from planner.walk import plan_walk
+from planner.planfile.validate import check_plan
+from planner.planning.local import LocalSettings
+from planner.planning.walk import plan_walk
 
 
 @pytest.fixture(scope="module")
@@ -35,7 +35,7 @@ def test_recursive_plans_up_a_10cm_step(climb):
 
 
 def test_the_climb_holds_up_in_mujoco_open_loop(climb):
-    from planner.simulate import SimSettings, run_open_loop
+    from planner.sim.simulate import SimSettings, run_open_loop
 
     plan, _ = climb
     m = run_open_loop(plan, SimSettings(time_scale=1.0)).metrics

@@ -8,7 +8,7 @@ import pytest
 from planner.problems import Theta3
 from planner.problems.base import ThetaOptions
 from planner.problems.compiled import cache_dir
-from planner.terrain import load_terrain
+from planner.world.terrain import load_terrain
 
 pytestmark = pytest.mark.skipif(shutil.which("cc") is None, reason="needs a C compiler")
 

@@ -2,8 +2,9 @@ import numpy as np
 import pytest
 import yaml
 
-from planner.cli import main
-from planner.course_gen import (
+from planner.cli.main import main
+from planner.core.errors import InputError
+from planner.world.course_gen import (
     EXTRA_KINDS,
     FEATURE_KINDS,
     LADDER,
@@ -23,8 +24,7 @@ from planner.course_gen import (
     parse_course_name,
     write_course,
 )
-from planner.errors import InputError
-from planner.terrain import Terrain, load_terrain
+from planner.world.terrain import Terrain, load_terrain
 
 SEEDS = range(31)
 DX_M = 0.001

@@ -1,5 +1,5 @@
 """The soft planner (8.2) out of a dead end: traced back and planned again with the
-foothold look-ahead (issue 13 item 5, :mod:`planner.local.soft`).
+foothold look-ahead (issue 13 item 5, :mod:`planner.planning.soft`).
 
 Up step10cm (a 10 cm step at x = 0.8 m, LittleDog's body 15 cm high) the greedy full
 strides put the front feet up the step with the hind feet stretched below it, a stance
@@ -8,13 +8,13 @@ point and planned again with the look-ahead (and, met again, with 0.6 of the str
 walk climbs and reaches (67 steps, 2 retraces, measured at the change that made this the
 test's course). The generated gen:2:0.6 was the course here until its dead end went away:
 since the joint-space swings enter a landing on a knee near its limit from above
-(:func:`planner.leg_swing.joint_space_swing`), the greedy walk passes there.
+(:func:`planner.motion.leg_swing.joint_space_swing`), the greedy walk passes there.
 
 On another machine (2026-11-26, the same code and packages, planning 1.4x slower) the
 second and third retraces, each from the same step as the first, met the same stance:
 the right hind foot had been left 14 cm before the riser a crawl cycle earlier, while the
 left climbed, and the walk stopped 135 cm short. With the 4th and 5th retraces starting
-one and two crawl cycles farther back (:data:`planner.local.soft.RETRACES`) it climbs
+one and two crawl cycles farther back (:data:`planner.planning.soft.RETRACES`) it climbs
 there too (66 steps, 5 retraces). The test asserts the dead end is met, traced back, and
 the walk reaches the goal, passing the independent check.
 """
@@ -22,9 +22,9 @@ the walk reaches the goal, passing the independent check.
 import numpy as np
 import pytest
 
-from planner.local.base import LocalSettings
-from planner.validate import check_plan
-from planner.walk import plan_walk
+from planner.planfile.validate import check_plan
+from planner.planning.local import LocalSettings
+from planner.planning.walk import plan_walk
 
 
 @pytest.fixture(scope="module")

@@ -1,13 +1,13 @@
-"""Fixed-rate trajectory export (planner.export) against the plan and in MuJoCo."""
+"""Fixed-rate trajectory export (planner.planfile.export) against the plan and in MuJoCo."""
 
 import numpy as np
 import pytest
 
-from planner.cli import main
-from planner.export import export_plan, load_trajectory, plan_from_trajectory
-from planner.plan import Plan, Samples
-from planner.simulate import cycle_starts, run_open_loop
-from planner.walk import plan_walk
+from planner.cli.main import main
+from planner.planfile.export import export_plan, load_trajectory, plan_from_trajectory
+from planner.planfile.plan import Plan, Samples
+from planner.planning.walk import plan_walk
+from planner.sim.simulate import cycle_starts, run_open_loop
 
 
 @pytest.fixture(scope="module")

@@ -1,9 +1,10 @@
-"""Foothold candidates over the leg's reachable, safe region (planner.footholds)."""
+"""Foothold candidates over the leg's reachable, safe region (planner.motion.footholds)."""
 
 import numpy as np
 import pytest
 
-from planner.footholds import (
+from planner.body.kinematics import hip_centre_B
+from planner.motion.footholds import (
     BODY_SLACK_M,
     HIP_FOLLOW,
     MIN_ADVANCE_M,
@@ -11,9 +12,8 @@ from planner.footholds import (
     best_and_shortest,
     foothold_candidates,
 )
-from planner.heuristics import EDGE_MARGIN_M, foothold_hazard
-from planner.kinematics import hip_centre_B
-from planner.terrain import Terrain
+from planner.motion.heuristics import EDGE_MARGIN_M, foothold_hazard
+from planner.world.terrain import Terrain
 
 
 def _terrain(kind, **spec):

@@ -21,7 +21,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from planner.cli import main
+from planner.cli.main import main
 
 SCALE = int(os.environ.get("STRATAWALK_FUZZ_SCALE", "1"))
 ROOT = Path(__file__).resolve().parents[1]

@@ -4,8 +4,10 @@ import time
 import numpy as np
 import pytest
 
-from planner.errors import InputError
-from planner.global_plan import (
+from planner.body.state import State
+from planner.core.errors import InputError
+from planner.motion.trajectory import Trajectory
+from planner.planning.global_plan import (
     CostWeights,
     GlobalSettings,
     candidate_trajectory,
@@ -14,10 +16,8 @@ from planner.global_plan import (
     stability_margin_m,
     trajectory_cost,
 )
-from planner.local.base import LocalSettings
-from planner.state import State
-from planner.terrain import load_terrain
-from planner.trajectory import Trajectory
+from planner.planning.local import LocalSettings
+from planner.world.terrain import load_terrain
 
 COURSE = "barrier15cm_opening"
 
@@ -41,7 +41,7 @@ def test_course_wall_blocks_the_straight_line_and_opens_to_the_left(course):
 
 
 def test_barrier_opening_must_be_ordered():
-    from planner.terrain import Terrain
+    from planner.world.terrain import Terrain
 
     spec = {"kind": "barrier", "length": 3.0, "x": 1.0, "height": 0.1, "thickness": 0.05}
     with pytest.raises(InputError, match="opening"):
@@ -109,7 +109,7 @@ def test_settings_errors_name_the_field():
 
 
 def test_cli_has_the_global_flag():
-    from planner.cli import build_parser
+    from planner.cli.main import build_parser
 
     args = build_parser().parse_args(
         ["plan", "--terrain", COURSE, "--goal", "2.2,0", "--global", "--terms", "2"]
@@ -147,9 +147,9 @@ def test_global_planner_walks_through_the_opening_where_the_local_planner_is_stu
 
 
 def test_a_candidate_the_planner_cannot_start_costs_as_much_as_no_progress(monkeypatch):
-    from planner import global_plan as gp
-    from planner.errors import NoSolutionFound
-    from planner.local.soft import SoftPlanner
+    from planner.core.errors import NoSolutionFound
+    from planner.planning import global_plan as gp
+    from planner.planning.soft import SoftPlanner
 
     problem = gp._Problem(
         "littledog",
@@ -179,7 +179,7 @@ def test_a_candidate_the_planner_cannot_start_costs_as_much_as_no_progress(monke
 def test_a_candidate_already_costlier_than_the_best_stops_early():
     """Early rejection: once the length, steps and planning time of a partial walk add up to
     the best candidate's C, planning stops; below that bound the same candidate walks on."""
-    from planner import global_plan as gp
+    from planner.planning import global_plan as gp
 
     problem = gp._Problem(
         "littledog", load_terrain("flat").spec, None, "soft", LocalSettings(),

@@ -1,13 +1,13 @@
-"""The guide path (planner.guide_path) and section 9 starting from it."""
+"""The guide path (planner.motion.guide_path) and section 9 starting from it."""
 
 import numpy as np
 import pytest
 
-from planner.global_plan import GlobalSettings, guide_tau0_xy, plan_global_walk
-from planner.guide_path import guide_path, traversability_map
-from planner.local.base import LocalSettings
-from planner.robot import load_robot
-from planner.terrain import load_terrain
+from planner.body.robot import load_robot
+from planner.motion.guide_path import guide_path, traversability_map
+from planner.planning.global_plan import GlobalSettings, guide_tau0_xy, plan_global_walk
+from planner.planning.local import LocalSettings
+from planner.world.terrain import load_terrain
 
 
 @pytest.fixture(scope="module")
@@ -120,7 +120,7 @@ def test_global_walks_through_the_opening_on_the_guide_path_alone():
 def test_a_batch_job_can_ask_for_the_global_planner():
     """The course table's 'global' rows: one batch job runs section 9 from the guide path,
     its planning time the whole search."""
-    from planner.batch import DEFAULTS, run_job
+    from planner.bench.batch import DEFAULTS, run_job
 
     job = DEFAULTS | {
         "robot": "littledog", "terrain": "flat", "planner": "global", "start": [0.2, 0.0],

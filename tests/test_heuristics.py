@@ -4,7 +4,9 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from planner.heuristics import (
+from planner.body.kinematics import kinematics_of
+from planner.body.state import State
+from planner.motion.heuristics import (
     BODY_TARGET_CLEARANCE_M,
     MAX_SUPPORT_TILT_RAD,
     body_pose_on_trajectory,
@@ -20,15 +22,13 @@ from planner.heuristics import (
     support_centroid_W,
     support_incentre_W,
 )
-from planner.kinematics import kinematics_of
-from planner.state import State
-from planner.trajectory import Trajectory
+from planner.motion.trajectory import Trajectory
 
 SLOPE = np.tan(np.radians(10.0))
 
 
 class _Plane:
-    """Test double of planner.terrain.Terrain: the plane z = a x + b y + c."""
+    """Test double of planner.world.terrain.Terrain: the plane z = a x + b y + c."""
 
     def __init__(self, a=0.0, b=0.0, c=0.0):
         self.a, self.b, self.c = a, b, c
@@ -51,7 +51,7 @@ class _Plane:
 
 
 def _real(name):
-    terrain = pytest.importorskip("planner.terrain")
+    terrain = pytest.importorskip("planner.world.terrain")
     return terrain.load_terrain(name)
 
 
@@ -204,7 +204,7 @@ def test_body_pose_and_reference_directions_on_a_slope(littledog, source):
 
 # ---- the body follows its footholds (issue 15 item 2) ---------------------------------------
 def _step_terrain(height):
-    from planner.terrain import Terrain
+    from planner.world.terrain import Terrain
 
     return Terrain.from_spec(
         {"name": "step", "friction": 0.7, "x_min": -0.5, "length": 2.0, "kind": "step",
@@ -248,7 +248,7 @@ def test_support_target_pitches_with_a_step_and_sits_between_the_levels(littledo
 
 
 def test_support_target_keeps_the_terrain_roll_and_clears_a_barrier(littledog):
-    from planner.terrain import Terrain
+    from planner.world.terrain import Terrain
 
     barrier = Terrain.from_spec(
         {"name": "b", "friction": 0.7, "x_min": -0.5, "length": 2.0, "kind": "barrier",

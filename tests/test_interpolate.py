@@ -5,28 +5,28 @@ import pinocchio as pin
 import pytest
 from scipy.special import expit
 
-from planner.contact import (
+from planner.body.contact import (
     contact_from_foot_centre,
     foot_centre_from_contact,
     foot_centres_W,
 )
-from planner.heuristics import nominal_height_m
-from planner.interpolate import (
+from planner.body.kinematics import kinematics_of
+from planner.body.state import State
+from planner.core.lie import coords_from_pose, interpolate_coords, pose_from_coords
+from planner.motion.heuristics import nominal_height_m
+from planner.motion.interpolate import (
     interpolate_leaf,
     interpolate_swing,
     swing_foot_path,
     swing_path,
 )
-from planner.kinematics import kinematics_of
-from planner.lie import coords_from_pose, interpolate_coords, pose_from_coords
-from planner.state import State
 
 SLOPE = np.tan(np.radians(10.0))
 STEP_H_M, STEP_X_M, STEP_W_M = 0.05, 0.5, 0.005
 
 
 class _Terrain:
-    """Test double of planner.terrain.Terrain from a height function and its gradient."""
+    """Test double of planner.world.terrain.Terrain from a height function and its gradient."""
 
     def __init__(self, h, grad):
         self._h, self._grad = h, grad
@@ -83,7 +83,7 @@ def source(request):
 def _terrain(kind, source):
     if source == "double":
         return DOUBLES[kind]()
-    mod = pytest.importorskip("planner.terrain")
+    mod = pytest.importorskip("planner.world.terrain")
     return mod.load_terrain(REAL[kind])
 
 

@@ -7,8 +7,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from planner.kinematics import foot_and_jacobian_np, kinematics_of
-from planner.robot import load_robot
+from planner.body.kinematics import foot_and_jacobian_np, kinematics_of
+from planner.body.robot import load_robot
 
 ROBOTS = ["littledog", "solo12", "anymal", "hyq", "go1"]
 

@@ -1,16 +1,17 @@
-"""Swings in the leg's joint space (planner.leg_swing) over a barrier, judged by the validator's
+"""Swings in the leg's joint space (planner.motion.leg_swing) over a barrier, judged by the
+validator's
 exact distances to the sharp terrain."""
 
 import numpy as np
 import pytest
 
-from planner.interpolate import interpolate_swing
-from planner.kinematics import kinematics_of
-from planner.leg_swing import joint_space_swing
-from planner.links import leg_links
-from planner.state import State
-from planner.terrain import Terrain
-from planner.validate import sharp_surface_distance
+from planner.body.kinematics import kinematics_of
+from planner.body.links import leg_links
+from planner.body.state import State
+from planner.motion.interpolate import interpolate_swing
+from planner.motion.leg_swing import joint_space_swing
+from planner.planfile.validate import sharp_surface_distance
+from planner.world.terrain import Terrain
 
 BARRIER = {"name": "b", "friction": 0.7, "x_min": -0.5, "length": 2.0, "kind": "barrier",
            "x": 0.8, "height": 0.075, "thickness": 0.03}  # fmt: skip
@@ -105,8 +106,8 @@ def test_joint_space_swing_refuses_a_moving_body(littledog, over_the_barrier):
 def test_a_swing_searched_around_an_edge_is_timed_slower(littledog, over_the_barrier):
     """The planner's joint-space swing is tagged and timed at OVER_EDGE_SPEED_FRACTION of
     the URDF speed limits (the servos' lag must stay under its millimetres of clearance)."""
-    from planner.local.soft import SoftPlanner
-    from planner.time_law import JOINT_SPEED_FRACTION, OVER_EDGE_SPEED_FRACTION
+    from planner.motion.time_law import JOINT_SPEED_FRACTION, OVER_EDGE_SPEED_FRACTION
+    from planner.planning.soft import SoftPlanner
 
     terrain, lift, touch = over_the_barrier
     planner = SoftPlanner(littledog, terrain)
@@ -135,8 +136,8 @@ def test_a_knee_flip_near_its_limit_keeps_the_foot_above_the_ground(littledog):
     then offered the forward branch, and the last joint segment flipped the knee with the
     foot sphere 2 cm into the ground. The validator's distance is the reference.
     """
-    from planner.lie import rotation_from_quat
-    from planner.terrain import load_terrain
+    from planner.core.lie import rotation_from_quat
+    from planner.world.terrain import load_terrain
 
     terrain = load_terrain("step10cm")
     kin = kinematics_of(littledog)
@@ -169,11 +170,11 @@ def test_a_knee_flip_near_its_limit_keeps_the_foot_above_the_ground(littledog):
 @pytest.mark.parametrize("n", [4, 6])
 def test_a_coarse_joint_space_swing_keeps_its_corners(littledog, over_the_barrier, n):
     """Few samples over the barrier: the executor's straight joint lines between two
-    samples (planner.interpolate.between_q) keep the foot and links as clear as the checked
+    samples (planner.motion.interpolate.between_q) keep the foot and links as clear as the checked
     segments, since every vertex of the joint path is a sample. Before, samples on either
     side of a vertex cut its corner (a knee flipped 140 degrees between two samples out of
     a 12 cm trench and the foot swept the trench's floor)."""
-    from planner.interpolate import between_q
+    from planner.motion.interpolate import between_q
 
     terrain, lift, touch = over_the_barrier
     path = joint_space_swing(littledog, terrain, lift, touch, n, 0)

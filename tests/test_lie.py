@@ -5,7 +5,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from planner.lie import (
+from planner.core.lie import (
     coords_from_pose,
     hat,
     hat_ca,

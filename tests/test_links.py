@@ -1,17 +1,17 @@
-"""Leg capsules against the sharp terrain (planner.links), checked against the validator."""
+"""Leg capsules against the sharp terrain (planner.body.links), checked against the validator."""
 
 import numpy as np
 import pytest
 
-from planner.links import (
+from planner.body.links import (
     KEYFRAME_ANGLE_RAD,
     KEYFRAME_MARGIN_M,
     WITNESS_GRID_M,
     _nearest_on_terrain,
     leg_links,
 )
-from planner.terrain import Terrain
-from planner.validate import sharp_surface_distance
+from planner.planfile.validate import sharp_surface_distance
+from planner.world.terrain import Terrain
 
 
 def _course(kind, **spec):
@@ -122,7 +122,7 @@ def test_path_margins_of_a_path_are_each_configurations_own(littledog, rng):
 
 def test_the_shank_end_inside_the_foot_sphere_is_cut(rng):
     """What is cut lies inside the foot sphere; the new end's ball touches it from inside."""
-    from planner.links import _outside_sphere
+    from planner.body.links import _outside_sphere
 
     cuts = 0
     for _ in range(300):
@@ -146,7 +146,7 @@ def test_the_shank_end_inside_the_foot_sphere_is_cut(rng):
 
 def test_littledog_shanks_are_not_cut_and_hyq_shanks_are(littledog):
     """LittleDog's shank cylinder stops short of its foot; HyQ's reaches the foot centre."""
-    from planner.robot import load_robot
+    from planner.body.robot import load_robot
 
     ld = {c.link: c.length_m for c in leg_links(littledog).capsules if c.leg == 0}
     assert ld["shank"] == pytest.approx(0.0917, abs=5e-4)
@@ -167,7 +167,7 @@ def test_littledog_shanks_are_not_cut_and_hyq_shanks_are(littledog):
 
 def test_sphere_penetration_agrees_with_the_exact_distance(rng):
     """Foot spheres against a riser: the sampled overlap vs the validator's exact distance."""
-    from planner.contact import sphere_penetration_m
+    from planner.body.contact import sphere_penetration_m
 
     step = _course("step", x=0.8, height=0.17)
     rho = 0.031

@@ -4,15 +4,15 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-import planner.local.base as base_module
-from planner.kinematics import kinematics_of
-from planner.local.base import OTHER_FOOTHOLDS
-from planner.local.gait_queue import CRAWL, GaitQueue
-from planner.local.soft import SoftPlanner
-from planner.robot import load_robot
-from planner.rolling import sliding
-from planner.terrain import load_terrain
-from planner.trajectory import Trajectory
+import planner.planning.local as base_module
+from planner.body.kinematics import kinematics_of
+from planner.body.robot import load_robot
+from planner.body.rolling import sliding
+from planner.motion.gait_queue import CRAWL, GaitQueue
+from planner.motion.trajectory import Trajectory
+from planner.planning.local import OTHER_FOOTHOLDS
+from planner.planning.soft import SoftPlanner
+from planner.world.terrain import load_terrain
 
 
 def test_queue_pop_push_swap():
@@ -78,7 +78,7 @@ def test_short_flat_walk_reaches_goal_on_the_leaves(flat_planner):
     assert plan.reached_goal, plan.message
     assert plan.distance_to_goal_m <= planner.settings.goal_tol_m
     assert plan.stats["steps"] >= 4
-    # independent check with Pinocchio: stance feet roll, never slide (planner.rolling)
+    # independent check with Pinocchio: stance feet roll, never slide (planner.body.rolling)
     assert _max_sliding(planner.robot, planner.terrain, plan.samples) < 1e-6
     assert all(s.in_contact.sum() >= 3 for s in plan.samples)
     assert np.all(np.diff(plan.times) > 0)
@@ -121,8 +121,8 @@ def _checked(plan_and_report):
 
 
 def test_soft_plan_over_a_step_passes_check(littledog):
-    from planner.terrain import Terrain
-    from planner.walk import plan_walk
+    from planner.planning.walk import plan_walk
+    from planner.world.terrain import Terrain
 
     step = Terrain.from_spec(
         {
@@ -150,13 +150,13 @@ def test_soft_plan_over_a_barrier_passes_check(littledog):
     torque, and not since (nor at 1.1 m before, nor 1.2 m since): a step that now fails
     at its body move no longer leaves the body moved for the next leg.
     """
-    from planner.kinematics import kinematics_of
-    from planner.terrain import load_terrain
-    from planner.walk import plan_walk
+    from planner.body.kinematics import kinematics_of
+    from planner.planning.walk import plan_walk
+    from planner.world.terrain import load_terrain
 
     barrier = load_terrain("barrier75mm")
     far_face_m = barrier.spec["x"] + barrier.spec["thickness"]
-    from planner.local.base import LocalSettings
+    from planner.planning.local import LocalSettings
 
     # a budget never reached: the test is about the plan, not the machine's speed (86 s
     # alone with the sway-stiffness bound; more beside a benchmark)
@@ -180,7 +180,7 @@ def test_soft_plan_over_a_barrier_passes_check(littledog):
 
 
 def test_hard_planner_walks_on_flat_ground(littledog):
-    from planner.walk import plan_walk
+    from planner.planning.walk import plan_walk
 
     plan = _checked(plan_walk(littledog, "flat", (0.45, 0.0), (0.2, 0.0), "hard"))
     assert plan.outcome["reached_goal"], plan.outcome["message"]
@@ -194,8 +194,8 @@ def test_hard_planner_plans_a_second_walk_with_a_wider_band_where_the_first_stal
     where the first walk stops short with time left, a second walk gets the wider band and
     the rest of the budget, and the walk ending nearer the goal is returned; a walk that
     reaches, or one that used the whole budget, is returned as it is."""
-    from planner.local.base import LocalPlan, LocalPlanner, LocalSettings
-    from planner.local.hard import LATERAL_BAND_M, WIDE_LATERAL_BAND_M, HardPlanner
+    from planner.planning.hard import LATERAL_BAND_M, WIDE_LATERAL_BAND_M, HardPlanner
+    from planner.planning.local import LocalPlan, LocalPlanner, LocalSettings
 
     calls, outcomes = [], []
 
@@ -227,9 +227,9 @@ def test_hard_planner_plans_a_second_walk_with_a_wider_band_where_the_first_stal
 def test_hard_planner_climbs_a_step_with_the_com_over_tau(littledog):
     """8.1 up a 4 cm step (issue 15 item 3): the plan passes the validator and every body
     move onto three legs ends with the COM over tau, beside it by at most the lateral band."""
-    from planner.local.hard import LATERAL_BAND_M
-    from planner.terrain import Terrain
-    from planner.walk import plan_walk
+    from planner.planning.hard import LATERAL_BAND_M
+    from planner.planning.walk import plan_walk
+    from planner.world.terrain import Terrain
 
     step = Terrain.from_spec(
         {"name": "step4cm", "kind": "step", "x": 0.42, "height": 0.04, "friction": 0.7,
@@ -279,7 +279,7 @@ def test_soft_planner_retraces_a_dead_end_with_shorter_strides(littledog, monkey
     shorter strides (soft.RETRACES): a full HL stride that leaves FL no step is
     replaced by 0.6 of it. Planned again at full stride only (the rule before) it meets the
     same dead end."""
-    from planner.local.base import LocalSettings
+    from planner.planning.local import LocalSettings
 
     terrain = load_terrain("flat")
     soft = SoftPlanner(littledog, terrain, settings=LocalSettings(max_cycles=40))
@@ -302,8 +302,8 @@ def test_greedy_planner_stays_in_the_dead_end_soft_traces_back_from(littledog):
     """The greedy planner (8.2 as the paper has it) never traces back: from the dead end
     soft leaves by its retraces it only swaps legs and shortens strides, and stops short
     within the 34 cycles soft reaches in (33, 2 retraces, at 1a47df2)."""
-    from planner.local.base import LocalSettings
-    from planner.local.soft import GreedyPlanner
+    from planner.planning.local import LocalSettings
+    from planner.planning.soft import GreedyPlanner
 
     greedy = GreedyPlanner(littledog, load_terrain("flat"), settings=LocalSettings(max_cycles=34))
     _dead_end_rule(greedy)
@@ -314,8 +314,8 @@ def test_greedy_planner_stays_in_the_dead_end_soft_traces_back_from(littledog):
 def test_recursive_planner_traces_back_where_soft_gets_stuck(littledog):
     """FL steps only after a short HL step and a full FR step: soft's retrace shortens
     every stride alike and stays stuck; 8.5 tries the ambitions step by step."""
-    from planner.local.base import LocalSettings
-    from planner.local.recursive import RecursivePlanner
+    from planner.planning.local import LocalSettings
+    from planner.planning.recursive import RecursivePlanner
 
     terrain = load_terrain("flat")
     soft = SoftPlanner(littledog, terrain, settings=LocalSettings(max_cycles=40))
@@ -335,7 +335,7 @@ def test_recursive_planner_traces_back_where_soft_gets_stuck(littledog):
 def test_recursive_planner_tries_every_leg_before_it_stops(littledog):
     """From the start the queue's first two legs (HL, FL) cannot step: a window over them
     finds nothing, so F is run once more over every leg (HR steps) instead of "stuck"."""
-    from planner.local.recursive import RecursivePlanner
+    from planner.planning.recursive import RecursivePlanner
 
     rec = RecursivePlanner(littledog, load_terrain("flat"))
     real = rec.step
@@ -383,8 +383,8 @@ def test_a_failed_body_move_is_not_solved_again(littledog):
 
 
 def test_ctrl_c_keeps_the_plan_so_far(littledog, monkeypatch):
-    from planner.validate import check_plan
-    from planner.walk import plan_walk
+    from planner.planfile.validate import check_plan
+    from planner.planning.walk import plan_walk
 
     calls = {"n": 0}
     real = SoftPlanner.step
@@ -407,7 +407,7 @@ def test_steps_in_place_stop_the_planner(flat_planner):
     until the time budget (barrier75mm stepped in place for 240 s)."""
     import time
 
-    from planner.local.base import Walk, _Run
+    from planner.planning.local import Walk, _Run
 
     p = flat_planner
     tau = Trajectory.straight((0.2, 0.0), (1.2, 0.0), p.terrain, p.com_height_m())
@@ -486,7 +486,7 @@ def test_a_failed_step_is_tried_again_with_the_body_lower(flat_planner, monkeypa
 def test_a_path_from_a_start_out_of_reach_may_only_come_back_into_reach(flat_planner):
     """8.3's measured state can have a stretched leg out of the planner's reach (its foot
     rolled): a path from there is accepted while the IK miss shrinks, not when it grows."""
-    from planner.trajectory import Trajectory
+    from planner.motion.trajectory import Trajectory
 
     lp = flat_planner
     tau = Trajectory.straight((0.2, 0.0), (1.0, 0.0), lp.terrain, lp.com_height_m())
@@ -512,8 +512,8 @@ def test_a_long_legged_robot_ends_standing_over_the_goal():
     """Laikago's stride (17 cm) is long next to the 5 cm goal tolerance: its crawl stepped in
     place around the goal (no keyframe nearer than 7 cm). The arrival move (four feet, S0)
     brings the COM over the goal; the plan passes the validator."""
-    from planner.terrain import Terrain
-    from planner.walk import plan_walk
+    from planner.planning.walk import plan_walk
+    from planner.world.terrain import Terrain
 
     robot = load_robot("laikago")
     flat = Terrain.from_spec({"name": "flat", "kind": "flat", "friction": 0.7, "length": 3.0})
@@ -536,8 +536,8 @@ def test_a_planner_stopped_after_tracing_back_keeps_the_walk_that_came_nearest(l
     windows, the second stall the whole walk), then stop short; the plan returned is the
     walk that came nearest the goal, not the one left after the last rewind (recursive
     returned a 0-step plan on feat:step:-0.12 so), and it is still one consistent walk."""
-    from planner.local.base import LocalSettings
-    from planner.local.recursive import RecursivePlanner, RecursiveSettings
+    from planner.planning.local import LocalSettings
+    from planner.planning.recursive import RecursivePlanner, RecursiveSettings
 
     terrain = load_terrain("flat")
     settings = LocalSettings(max_cycles=400, no_progress_cycles=12)
@@ -596,7 +596,7 @@ def test_a_step_asked_for_a_knee_branch_lands_on_it_or_fails(flat_planner, leg):
 
 def _standing(planner, base_W, feet_xy, knees):
     """A level four-foot State: body origin at ``base_W``, feet on the terrain at ``feet_xy``."""
-    from planner.state import State
+    from planner.body.state import State
 
     robot, terrain = planner.robot, planner.terrain
     feet = np.array([[x, y, float(terrain.height(x, y))] for x, y in feet_xy])
@@ -613,7 +613,7 @@ def _exact_far_clearance_m(robot, state, leg, box_lo, box_hi):
     """Least distance of ``leg``'s thigh and shank capsules, away from the foot, to the
     ground plane z = 0 and an axis-aligned box (a barrier): points every 0.5 mm on the axes.
     """
-    from planner.links import leg_links
+    from planner.body.links import leg_links
 
     links = leg_links(robot)
     a, b = links.segments_W(
@@ -646,7 +646,7 @@ def test_a_hind_foot_that_stops_the_body_passing_a_barrier_is_refused(littledog)
     judged); on flat ground there is no tall edge to judge. The greedy planner keeps its
     footholds.
     """
-    from planner.local.recursive import RecursivePlanner
+    from planner.planning.recursive import RecursivePlanner
 
     barrier = load_terrain("barrier75mm")  # x 0.80-0.83 m, 7.5 cm high
     lo = np.array([barrier.spec["x"], -1.0, -1.0])

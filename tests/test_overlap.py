@@ -1,4 +1,4 @@
-"""The swing that overlaps its body move's end (planner.local.overlap, issue 16).
+"""The swing that overlaps its body move's end (planner.planning.overlap, issue 16).
 
 Checked against independent references: the validator (``check``), Pinocchio's COM and
 foot frames for the three-leg support, the plan without overlap (same stances), and MuJoCo.
@@ -8,11 +8,11 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from planner.local.base import LocalSettings
-from planner.local.overlap import SLIDING_BUDGET_M
-from planner.simulate import run_open_loop
-from planner.stability import PATH_BALANCE_MARGIN_M
-from planner.walk import plan_walk
+from planner.body.stability import PATH_BALANCE_MARGIN_M
+from planner.planning.local import LocalSettings
+from planner.planning.overlap import SLIDING_BUDGET_M
+from planner.planning.walk import plan_walk
+from planner.sim.simulate import run_open_loop
 
 
 @pytest.fixture(scope="module")
@@ -97,8 +97,8 @@ def test_overlapped_walk_holds_up_in_mujoco(flat_pair):
 def test_overlap_on_a_generated_rough_course_passes_check():
     """A seeded generated course (rough relief and features the planner was not tuned on):
     the overlapped walk validates and some swings overlap."""
-    from planner.course_gen import course_goal_xy, generate_course
-    from planner.terrain import Terrain
+    from planner.world.course_gen import course_goal_xy, generate_course
+    from planner.world.terrain import Terrain
 
     spec = generate_course(seed=3, length_m=1.0, difficulty=0.6)
     terrain = Terrain.from_spec(spec)
@@ -111,14 +111,14 @@ def test_overlap_on_a_generated_rough_course_passes_check():
 def test_overlap_measures_sliding_as_check_does():
     """The overlap's sliding budget is held to ``check``'s measure on relief (rough4cm):
     each pair of samples with its own contact points' normals (Pinocchio's foot frames,
-    the contact points of the sphere centres, :func:`planner.rolling.sliding`), not the
+    the contact points of the sphere centres, :func:`planner.body.rolling.sliding`), not the
     swing's first normals (they differ by up to 7x here; gen:44's relief hid a 1.8 um
     slide under the 0.5 um budget that way, and check refused the plan)."""
-    from planner.contact import unique_contact_points
-    from planner.local.overlap import _max_sliding_m
-    from planner.local.soft import SoftPlanner
-    from planner.plan import states_of_samples
-    from planner.rolling import sliding
+    from planner.body.contact import unique_contact_points
+    from planner.body.rolling import sliding
+    from planner.planfile.plan import states_of_samples
+    from planner.planning.overlap import _max_sliding_m
+    from planner.planning.soft import SoftPlanner
 
     plan, report = plan_walk("littledog", "rough4cm", (0.6, 0.0), (0.2, 0.0), "soft")
     assert report.ok, report.summary()

@@ -1,4 +1,4 @@
-"""The swing overlaps searched in a forked worker (planner.local.prefetch): the same plan to
+"""The swing overlaps searched in a forked worker (planner.planning.prefetch): the same plan to
 the bit as the planner computing them itself, through rewinds, and without a worker."""
 
 import copy
@@ -12,12 +12,12 @@ import time
 import numpy as np
 import pytest
 
-from planner.local.base import LocalSettings, Walk
-from planner.local.prefetch import ENV_OFF, OverlapWorker
-from planner.local.soft import SoftPlanner
-from planner.terrain import load_terrain
-from planner.trajectory import Trajectory
-from planner.walk import plan_walk
+from planner.motion.trajectory import Trajectory
+from planner.planning.local import LocalSettings, Walk
+from planner.planning.prefetch import ENV_OFF, OverlapWorker
+from planner.planning.soft import SoftPlanner
+from planner.planning.walk import plan_walk
+from planner.world.terrain import load_terrain
 
 
 @pytest.fixture(autouse=True)
@@ -144,7 +144,7 @@ def test_a_planner_killed_takes_its_worker_with_it(tmp_path):
     stopped on Ctrl-C once left its worker blocked on the pipe, and the batch hung)."""
     env = dict(os.environ, **{ENV_OFF: "1"})
     proc = subprocess.Popen(
-        [sys.executable, "-m", "planner.cli", "plan", "--terrain", "flat", "--goal", "2.2,0",
+        [sys.executable, "-m", "planner.cli.main", "plan", "--terrain", "flat", "--goal", "2.2,0",
          "--out", str(tmp_path / "p.json")],
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True, env=env,
     )  # fmt: skip
@@ -174,9 +174,9 @@ def _alive(pid: str) -> bool:
 
 
 def test_a_pool_with_a_process_per_core_plans_without_the_worker():
-    """batch and bench's pools (planner.batch.run_pool): a job process per core turns the
+    """batch and bench's pools (planner.bench.batch.run_pool): a job process per core turns the
     worker off in each (it would only add a process per core); fewer leave it on."""
-    from planner.batch import run_pool
+    from planner.bench.batch import run_pool
 
     def error(job, exc):
         raise exc

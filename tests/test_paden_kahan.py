@@ -3,14 +3,14 @@ import math
 import numpy as np
 import pytest
 
-from planner.paden_kahan import subproblem1, subproblem2, subproblem3
+from planner.body.paden_kahan import subproblem1, subproblem2, subproblem3
 
 N_CASES = 10_000
 TWO_PI = 2.0 * math.pi
 
 
 def _rot(w, th):
-    """Rodrigues rotation about unit w (independent of planner.lie on purpose)."""
+    """Rodrigues rotation about unit w (independent of planner.core.lie on purpose)."""
     K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
     return np.eye(3) + math.sin(th) * K + (1.0 - math.cos(th)) * (K @ K)
 

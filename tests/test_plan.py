@@ -5,12 +5,12 @@ import json
 import numpy as np
 import pytest
 
-from planner.errors import InputError
-from planner.interpolate import interpolate_leaf, interpolate_swing
-from planner.plan import GRID_MARGIN_M, PLAN_FORMAT, Plan
+from planner.body.rolling import end_keyframe
+from planner.core.errors import InputError
+from planner.motion.interpolate import interpolate_leaf, interpolate_swing
+from planner.planfile.plan import GRID_MARGIN_M, PLAN_FORMAT, Plan
 from planner.problems import Theta2, Theta3, Theta4
-from planner.rolling import end_keyframe
-from planner.terrain import load_terrain
+from planner.world.terrain import load_terrain
 
 OUTCOME = {"reached_goal": True, "distance_to_goal": 0.0, "message": "test plan"}
 

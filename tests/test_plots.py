@@ -4,16 +4,16 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from planner.cli import main
-from planner.plots import (
+from planner.body.robot import LEG_NAMES as ROBOT_LEG_NAMES
+from planner.body.statics import GRAVITY_W
+from planner.cli.main import main
+from planner.replay.plots import (
     FIGURES,
     LEG_NAMES,
     cone_margin,
     fig_gait,
     stance_segments,
 )
-from planner.robot import LEG_NAMES as ROBOT_LEG_NAMES
-from planner.statics import GRAVITY_W
 
 
 @pytest.fixture(scope="module")
@@ -75,7 +75,7 @@ def test_plot_command_writes_the_figures(walk, tmp_path, capsys):
 
 
 def test_demo_ends_with_the_replay_and_the_figures(walk, tmp_path, monkeypatch, capsys):
-    import planner.cli
+    import planner.cli.main
 
     path, plan, _ = walk
 
@@ -90,7 +90,7 @@ def test_demo_ends_with_the_replay_and_the_figures(walk, tmp_path, monkeypatch, 
         plan.save(args.out)
         return 0
 
-    monkeypatch.setattr(planner.cli, "_cmd_plan", short_plan)
+    monkeypatch.setattr(planner.cli.main, "_cmd_plan", short_plan)
     assert main(["demo", "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out
     assert (tmp_path / "replay.html").stat().st_size > 100_000

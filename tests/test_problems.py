@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
-from planner import statics
+from planner.body import statics
+from planner.body.robot import load_robot
 from planner.problems import Theta1, Theta2, Theta3, Theta4, ThetaOptions
 from planner.problems.base import FEASIBILITY_TOL
-from planner.robot import load_robot
-from planner.terrain import load_terrain
+from planner.world.terrain import load_terrain
 
 # (terrain, body x [m]): flat ground, a 10 degree slope, straddling a 5 cm step
 STANCES = [("flat", 0.3), ("slope10", 1.0), ("step5cm", None)]
@@ -127,7 +127,7 @@ def test_theta1_with_a_height_band_pins_the_com_over_the_target(dog, name, x):
     assert statics.forces_in_friction_cones(
         sol.state.forces_W, mu, support, terrain.normal(sol.state.feet_W)
     )
-    from planner.stability import support_margin_m
+    from planner.body.stability import support_margin_m
 
     assert support_margin_m(tri, com) >= band.options.balance_margin_m - 1e-6
     pinned = Theta1(dog, terrain, support=support).solve(start, rc, u_f, u_n)
@@ -237,8 +237,8 @@ def test_clearance_constraint_generation_over_a_barrier(littledog):
 
 def _exact_link_clearance(dog, terrain, state):
     """Per capsule: least exact distance of its axis to the sharp terrain minus its radius."""
-    from planner.links import leg_links
-    from planner.validate import sharp_surface_distance
+    from planner.body.links import leg_links
+    from planner.planfile.validate import sharp_surface_distance
 
     links = leg_links(dog)
     q = dog.q_from(state.base_position_W, state.base_quaternion_xyzw, state.joints_rad)
@@ -250,7 +250,7 @@ def _exact_link_clearance(dog, terrain, state):
 def test_theta2_keeps_leg_links_off_the_terrain(dog, name, x):
     """Every thigh and shank keeps its keyframe margin, measured exactly (to the ~1 mm
     of the witness cloud); the NLP's rows are the witness distances at the start."""
-    from planner.links import leg_links
+    from planner.body.links import leg_links
     from planner.problems.base import WITNESS_SLACK_M
 
     terrain, placed, u_f, u_n = _placed(dog, name, x)
@@ -265,7 +265,7 @@ def test_theta2_keeps_leg_links_off_the_terrain(dog, name, x):
     x0 = problem.initial_guess(start, p)
     x0[problem._x_slices["p"]] = start.base_position_W  # the start pose itself
     x0[problem._x_slices["theta"]] = start.joints_rad.ravel()
-    from planner.lie import coords_from_pose
+    from planner.core.lie import coords_from_pose
 
     x0[problem._x_slices["phi"]] = coords_from_pose(start.pose)[3:]
     g = np.array(problem._g_fun(x0, p)).ravel()[problem._g_slices["leg_clearance"]]
@@ -307,7 +307,7 @@ def test_theta2_tilt_stays_within_max_tilt_of_u_n(dog):
 def test_touchdown_joints_keep_off_their_limits(dog):
     """Theta3 keeps the touch-down joints LANDING_LIMIT_MARGIN_RAD inside the URDF limits
     where it can, so the swing can lift the foot off along the normal again (its pre-pose)."""
-    from planner.kinematics import kinematics_of
+    from planner.body.kinematics import kinematics_of
     from planner.problems.base import LANDING_LIMIT_MARGIN_RAD, landing_bounds_rad
 
     terrain, placed, _, _ = _placed(dog, "flat", 0.3)
@@ -347,8 +347,8 @@ def test_touchdown_uses_the_margin_only_where_nothing_else_lands(dog):
 def test_theta2_retry_starts_turned_to_the_reference_directions(dog):
     """Theta2's second start (after an infeasible first solve): the body turned to
     (u_f, u_n), its COM moved toward r_c*, the legs on the same foot centres (the leaf)."""
-    from planner.heuristics import frame_from_directions
-    from planner.lie import pose_from_coords
+    from planner.core.lie import pose_from_coords
+    from planner.motion.heuristics import frame_from_directions
 
     terrain, placed, u_f, _ = _placed(dog, "step5cm", None)
     start = placed.state
@@ -373,7 +373,7 @@ def test_theta2_keeps_the_commanded_torques_within_the_fraction(dog):
     for at most 40 %, it finds a pose that the independent check (Clarabel) confirms."""
     from dataclasses import replace
 
-    from planner.torques import TorqueCheck
+    from planner.body.torques import TorqueCheck
 
     terrain, placed, u_f, u_n = _placed(dog, "step5cm", None)
     start, support = placed.state, (1, 2, 3)
@@ -401,8 +401,8 @@ def test_theta2_stiffens_a_three_leg_stance_when_asked(dog):
     asked for 1.2 times it, the cuts find a pose that the independent Hessian confirms."""
     from dataclasses import replace
 
-    from planner.stiffness import sway_stiffness_of
-    from planner.torques import TorqueCheck
+    from planner.body.stiffness import sway_stiffness_of
+    from planner.body.torques import TorqueCheck
 
     terrain, placed, u_f, u_n = _placed(dog, "step5cm", None)
     start, support = placed.state, (1, 2, 3)
@@ -441,7 +441,7 @@ def test_theta2_on_a_support_narrower_than_the_balance_margin_solves_nothing(dog
     has an inradius below the 25 mm balance margin, so no COM, hence no body pose, keeps
     it. Theta2 says so without IPOPT; IPOPT, asked anyway, finds no pose either, and its
     best keeps no more margin than the inradius."""
-    from planner.stability import support_margin_m, triangle_inradius_m
+    from planner.body.stability import support_margin_m, triangle_inradius_m
 
     terrain, placed, u_f, u_n = _placed(dog, "flat", 0.3)
     start, support = placed.state.copy(), (1, 2, 3)

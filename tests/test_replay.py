@@ -20,9 +20,9 @@ import pytest
 import umsgpack
 from PIL import Image
 
-from planner.cli import main
-from planner.errors import InputError
-from planner.plan import Samples
+from planner.cli.main import main
+from planner.core.errors import InputError
+from planner.planfile.plan import Samples
 from planner.replay import ReplayServer, build_scene, check_host, scene_html
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
@@ -475,8 +475,8 @@ def test_compare_from_the_command_line(walk, tmp_path, capsys):
 @pytest.fixture(scope="module")
 def long_walk(tmp_path_factory):
     """A real 4 m walk (soft persuasion) on a 5 m flat course."""
-    from planner.local.base import LocalSettings
-    from planner.walk import plan_walk
+    from planner.planning.local import LocalSettings
+    from planner.planning.walk import plan_walk
 
     folder = tmp_path_factory.mktemp("long")
     course = folder / "flat5.yaml"
@@ -505,7 +505,7 @@ def _robot_pixels(chromium, session, t_plan, speed):
 
 
 def test_robot_keeps_its_size_over_a_4m_walk(chromium, long_walk, tmp_path):
-    from planner.plan import Plan
+    from planner.planfile.plan import Plan
 
     plan = Plan.load(long_walk)
     assert plan.samples.q[-1, 0] - plan.samples.q[0, 0] > 3.9

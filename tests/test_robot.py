@@ -7,8 +7,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from planner.errors import RobotModelError
-from planner.robot import LEG_NAMES, load_robot
+from planner.body.robot import LEG_NAMES, load_robot
+from planner.core.errors import RobotModelError
 
 URDF = Path(__file__).resolve().parents[1] / "models" / "littledog" / "littledog.urdf"
 
@@ -54,7 +54,7 @@ def test_littledog_numbers_match_user_guide(littledog):
 
 
 def test_theta_nor_is_in_limits_and_under_the_hips(littledog):
-    from planner.kinematics import kinematics_of
+    from planner.body.kinematics import kinematics_of
 
     r = littledog
     assert np.all(r.theta_nor >= r.lower_rad) and np.all(r.theta_nor <= r.upper_rad)

@@ -1,16 +1,16 @@
-"""Rolling sphere feet (planner.rolling): against Pinocchio, the validator and MuJoCo."""
+"""Rolling sphere feet (planner.body.rolling): against Pinocchio, the validator and MuJoCo."""
 
 import numpy as np
 import pinocchio as pin
 import pytest
 
-from planner.interpolate import interpolate_leaf
-from planner.plan import Plan
+from planner.body.rolling import end_keyframe, rolling_displacement, sliding
+from planner.motion.interpolate import interpolate_leaf
+from planner.planfile.plan import Plan
+from planner.planfile.validate import check_plan
 from planner.problems import Theta2, Theta4
-from planner.rolling import end_keyframe, rolling_displacement, sliding
-from planner.simulate import SimSettings, run_open_loop
-from planner.terrain import load_terrain
-from planner.validate import check_plan
+from planner.sim.simulate import SimSettings, run_open_loop
+from planner.world.terrain import load_terrain
 
 OUTCOME = {"reached_goal": True, "distance_to_goal": 0.0, "message": "test"}
 
@@ -40,8 +40,8 @@ def _pinocchio_feet(dog, states):
 
 def test_leg_rotations_turn_as_pinocchio_s_feet(littledog):
     """leg_rotations_W (Rodrigues per joint) turns each shank as Pinocchio's foot frame."""
-    from planner.kinematics import kinematics_of
-    from planner.rolling import leg_rotations_W
+    from planner.body.kinematics import kinematics_of
+    from planner.body.rolling import leg_rotations_W
 
     kin = kinematics_of(littledog)
     model, data = littledog.model, littledog.model.createData()

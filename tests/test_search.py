@@ -3,12 +3,12 @@
 import numpy as np
 import pytest
 
-from planner.heuristics import reference_directions
+from planner.body.robot import load_robot
+from planner.motion.heuristics import reference_directions
+from planner.motion.trajectory import Trajectory
+from planner.planning.omega import omega
 from planner.problems import Theta1, Theta4
-from planner.robot import load_robot
-from planner.search import omega
-from planner.terrain import load_terrain
-from planner.trajectory import Trajectory
+from planner.world.terrain import load_terrain
 
 
 @pytest.fixture(scope="module")
@@ -55,7 +55,7 @@ def test_omega_returns_at_once_when_the_far_end_is_feasible(setup):
 def test_farthest_feasible_bisects_the_screened_lambdas(edge):
     """Feasible up to the ``edge``-th nearest of 32 lambdas: the farthest is tried first,
     then bisection finds the edge in 1 + log2(31) solves, never solving a lambda twice."""
-    from planner.search import farthest_feasible
+    from planner.planning.omega import farthest_feasible
 
     lams = [0.01 * k for k in range(31, -1, -1)]  # farthest first
     edge_lam = 0.01 * edge

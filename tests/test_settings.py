@@ -1,14 +1,14 @@
-"""User settings (planner.settings) and the plan command's input checks."""
+"""User settings (planner.planning.settings) and the plan command's input checks."""
 
 import json
 
 import pytest
 
-from planner.cli import _join_negative_xy, main
-from planner.errors import InputError
-from planner.plan import Plan
-from planner.settings import load_config, resolve
-from planner.validate import check_plan
+from planner.cli.main import _join_negative_xy, main
+from planner.core.errors import InputError
+from planner.planfile.plan import Plan
+from planner.planfile.validate import check_plan
+from planner.planning.settings import load_config, resolve
 
 
 def _one_line_error(capsys) -> str:
@@ -115,7 +115,7 @@ def test_preset_under_config_and_options(tmp_path, capsys):
 
 
 def test_preset_lengths_scale_with_the_robot():
-    from planner.settings import PRESETS, preset
+    from planner.planning.settings import PRESETS, preset
 
     got = preset("fast", 2.0)
     assert got["level_clearance_m"] == pytest.approx(2.0 * PRESETS["fast"]["level_clearance_m"])

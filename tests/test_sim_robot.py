@@ -6,11 +6,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from planner.plan import TerrainGrid
-from planner.robot import load_robot, robot_names
-from planner.servo_model import LITTLEDOG_SERVOS, servo_model
-from planner.sim_robot import _fix_inertia, _resolve_package, sim_robot_urdf
-from planner.simulate import Simulator
+from planner.body.robot import load_robot, robot_names
+from planner.body.servo_model import LITTLEDOG_SERVOS, servo_model
+from planner.planfile.plan import TerrainGrid
+from planner.sim.sim_robot import _fix_inertia, _resolve_package, sim_robot_urdf
+from planner.sim.simulate import Simulator
 
 
 def _flat_grid() -> TerrainGrid:
@@ -102,9 +102,9 @@ def test_unreadable_meshes_become_the_planners_primitives():
 def test_another_robot_walks_with_feedback_and_arrives_over_the_goal():
     """A1 (13.7 kg, 37 cm legs) on flat with feedback (8.3) in MuJoCo: its steps are 13 cm,
     so the walk ends with the arrival move from the measured state (COM over the goal)."""
-    from planner.execution import simulate_plan
-    from planner.terrain import Terrain
-    from planner.walk import plan_walk
+    from planner.planning.walk import plan_walk
+    from planner.sim.execution import simulate_plan
+    from planner.world.terrain import Terrain
 
     flat = Terrain.from_spec({"name": "flat", "kind": "flat", "friction": 0.7, "length": 2.0})
     plan, report = plan_walk("a1", flat, (0.6, 0.0), (0.0, 0.0))
@@ -119,15 +119,15 @@ def test_another_robot_walks_with_feedback_and_arrives_over_the_goal():
 def test_timing_scales_with_the_leg_unless_given(littledog):
     """LittleDog keeps its time law's numbers; ANYmal (s = 3.58) gets speeds and times
     x sqrt(s) and the same accelerations (the same Froude number); a given value wins."""
-    from planner.local.base import (
+    from planner.body.robot_scale import length_scale
+    from planner.planning.local import (
         BODY_ACCEL_M_S2,
         BODY_SPEED_M_S,
         SWING_TIME_S,
         LocalSettings,
     )
-    from planner.local.soft import SoftPlanner
-    from planner.robot_scale import length_scale
-    from planner.terrain import load_terrain
+    from planner.planning.soft import SoftPlanner
+    from planner.world.terrain import load_terrain
 
     flat = load_terrain("flat")
     ld = SoftPlanner(littledog, flat).settings

@@ -3,8 +3,11 @@ import json
 import numpy as np
 import pytest
 
-from planner.cli import main
-from planner.execution import (
+from planner.cli.main import main
+from planner.motion.footholds import MIN_ADVANCE_M
+from planner.planfile.plan import Plan, Samples
+from planner.planning.walk import plan_walk
+from planner.sim.execution import (
     Measurement,
     SimulatedMocap,
     plan_step_cycles,
@@ -13,9 +16,7 @@ from planner.execution import (
     run_feedback,
     shift_body,
 )
-from planner.footholds import MIN_ADVANCE_M
-from planner.plan import Plan, Samples
-from planner.simulate import (
+from planner.sim.simulate import (
     SimSettings,
     Simulator,
     cycle_starts,
@@ -23,8 +24,7 @@ from planner.simulate import (
     run_open_loop,
     terrain_model,
 )
-from planner.terrain import load_terrain
-from planner.walk import plan_walk
+from planner.world.terrain import load_terrain
 
 
 @pytest.fixture(scope="module")
@@ -53,7 +53,7 @@ def test_terrain_becomes_plane_boxes_or_height_field():
     def model(name):
         t = load_terrain(name)
         origin, res, h = t.height_grid(0.0, 1.5, -0.3, 0.3, 0.005)
-        from planner.plan import TerrainGrid
+        from planner.planfile.plan import TerrainGrid
 
         return terrain_model(TerrainGrid(np.array(origin), res, h), t)
 
@@ -92,8 +92,8 @@ def test_feedforward_removes_the_servo_sag(short_plan):
     """Standing, PD servos sag by tau / kp; a feed-forward of the forces they settle into
     (uniform stiffness: least sum tau^2) removes most of it. (The executor commands the
     effort-weighted distribution, which a four-leg stand settles away from: its use is on
-    three legs, planner.torques.)"""
-    from planner.torques import TorqueCheck
+    three legs, planner.body.torques.)"""
+    from planner.body.torques import TorqueCheck
 
     plan = short_plan
     q0 = plan.samples.q[0]
@@ -140,7 +140,7 @@ def test_three_leg_servo_loads_are_measured_against_statics(short_plan, open_loo
     reports is no less than the least achievable ratio (any admissible forces, Clarabel) at
     the plan's three-leg samples, and no more than the effort limit; the excess over the
     feed-forward is part of it."""
-    from planner.torques import TorqueCheck
+    from planner.body.torques import TorqueCheck
 
     m = open_loop.metrics
     tc = TorqueCheck(short_plan.load_robot())
@@ -248,7 +248,7 @@ def test_settings_are_checked():
 
 def test_feedback_backs_off_instead_of_giving_up(short_plan, monkeypatch):
     """Every full-stride step fails from the measured state: half steps carry the walk on."""
-    from planner.local.base import LocalPlanner
+    from planner.planning.local import LocalPlanner
 
     real = LocalPlanner.step
     tried = []
@@ -298,7 +298,7 @@ def test_plan_step_cycles_hold_each_planned_swing(short_plan):
 def refuse_steps(monkeypatch, phase: str, plans_foothold_only: bool) -> None:
     """Every step planned anew fails in ``phase`` (only those onto a given foothold, the
     plan's, with ``plans_foothold_only``), nothing moved."""
-    from planner.local.base import LocalPlanner
+    from planner.planning.local import LocalPlanner
 
     real = LocalPlanner.step
 
@@ -366,7 +366,7 @@ def test_feedback_executes_the_plans_own_steps_corrected_first(short_plan, monke
     where the corrected step passes its gates (short_plan's second step lifts with 24 mm of
     balance margin, under the 25 mm asked: planned anew onto the plan's foothold); with no
     gate passing (a balance margin of 1 m asked) every step is planned anew."""
-    import planner.stability
+    import planner.body.stability
 
     res = run_feedback(short_plan, max_cycles=4, plan_steps_first=True)
     m, fb = res.metrics, res.executed.stats["feedback"]
@@ -376,7 +376,7 @@ def test_feedback_executes_the_plans_own_steps_corrected_first(short_plan, monke
     for k, (leg, foot) in enumerate(planned_steps(short_plan)[:3]):
         landed = kfs[k + 1].feet[leg]
         assert np.linalg.norm(landed[:2] - foot[:2]) < 0.015, (k, landed, foot)
-    monkeypatch.setattr(planner.stability, "BALANCE_MARGIN_M", 1.0)
+    monkeypatch.setattr(planner.body.stability, "BALANCE_MARGIN_M", 1.0)
     res = run_feedback(short_plan, max_cycles=2, plan_steps_first=True)
     fb = res.executed.stats["feedback"]
     assert fb["plan_steps_corrected"] == 0 and fb["plan_steps_followed"] == 2, fb
@@ -387,12 +387,12 @@ def test_a_corrected_plan_step_that_fails_a_gate_is_not_executed(short_plan, mon
     """The fallback refuses a corrected step whose COM nears a support edge, whose leg links
     dip into the terrain, or that fails the check of a path planned anew: nothing is executed
     and the caller goes on replanning."""
-    import planner.links
-    import planner.stability
-    from planner.execution import _follow_corrected
-    from planner.local.base import LocalPlanner
-    from planner.local.soft import SoftPlanner
-    from planner.simulate import new_run
+    import planner.body.links
+    import planner.body.stability
+    from planner.planning.local import LocalPlanner
+    from planner.planning.soft import SoftPlanner
+    from planner.sim.execution import _follow_corrected
+    from planner.sim.simulate import new_run
 
     robot, terrain = short_plan.load_robot(), short_plan.load_terrain()
     local = SoftPlanner(robot, terrain, mu=short_plan.friction)
@@ -405,18 +405,18 @@ def test_a_corrected_plan_step_that_fails_a_gate_is_not_executed(short_plan, mon
 
     monkeypatch.setattr(LocalPlanner, "path_problem", counted)
     if gate == "balance":  # no support triangle holds the COM 1 m inside it
-        monkeypatch.setattr(planner.stability, "BALANCE_MARGIN_M", 1.0)
+        monkeypatch.setattr(planner.body.stability, "BALANCE_MARGIN_M", 1.0)
     elif gate == "path":  # e.g. a joint past its torque margin on the corrected samples
         monkeypatch.setattr(LocalPlanner, "path_problem", lambda self, path: "torque")
     else:  # after the first sample every link 1 m inside the terrain
-        real = planner.links.LegLinks.path_margin
+        real = planner.body.links.LegLinks.path_margin
         calls = []
 
         def deeper(self, terrain, q, swing_legs=(), scale=1.0):
             calls.append(1)
             return real(self, terrain, q, swing_legs, scale) - 1.0 * (len(calls) > 1)
 
-        monkeypatch.setattr(planner.links.LegLinks, "path_margin", deeper)
+        monkeypatch.setattr(planner.body.links.LegLinks, "path_margin", deeper)
     sim, ex = new_run(short_plan, None, "feedback")
     a, b = plan_step_cycles(short_plan)[0]
     t0 = sim.time
@@ -442,16 +442,16 @@ def test_a_corrected_step_brings_the_body_back_at_the_planners_body_speed(short_
     four-feet hold no shorter than the body-move time law's rest-to-rest time for 5 cm,
     not in the plan's own four-feet phase (barrier75mm's body, 2.8 cm off, was pulled back
     in 0.2 s and the robot tipped and fell); measured on the plan, no hold is added."""
-    import planner.stability
-    from planner.execution import (
+    import planner.body.stability
+    from planner.body.kinematics import hip_point_B
+    from planner.planning.local import BODY_ACCEL_M_S2
+    from planner.sim.execution import (
         _correction_time_s,
         _follow_corrected,
         _four_feet_span_s,
         shift_body,
     )
-    from planner.kinematics import hip_point_B
-    from planner.local.base import BODY_ACCEL_M_S2
-    from planner.simulate import new_run
+    from planner.sim.simulate import new_run
 
     robot, terrain, s = short_plan.load_robot(), short_plan.load_terrain(), short_plan.samples
     zero = np.zeros(3)
@@ -469,7 +469,7 @@ def test_a_corrected_step_brings_the_body_back_at_the_planners_body_speed(short_
     sim, ex = new_run(short_plan, None, "feedback")
     followed = []
     monkeypatch.setattr(ex, "follow", lambda t, q, contact: followed.append((t, q)) or True)
-    monkeypatch.setattr(planner.stability, "BALANCE_MARGIN_M", -1.0)  # timing only here
+    monkeypatch.setattr(planner.body.stability, "BALANCE_MARGIN_M", -1.0)  # timing only here
     shifted = shift_body(short_plan, [off, 0.0, 0.0])  # the same feet, the body 5 cm ahead
     centres = short_plan.foot_centres_W()
     for q_meas, hold in ((shifted.samples.q[a], need - span), (s.q[a], 0.0)):
@@ -487,9 +487,9 @@ def test_a_correction_keeps_a_leg_on_the_plans_other_knee(short_plan):
     leg beside an edge): measured exactly at the plan's first sample, the correction
     reproduces the plan's joints; with the leg's default branch it had flipped the knee
     (barrier75mm: the FR shank 33 mm into the barrier)."""
-    from planner.execution import correct_cycle
-    from planner.kinematics import kinematics_of
-    from planner.lie import rotation_from_quat
+    from planner.body.kinematics import kinematics_of
+    from planner.core.lie import rotation_from_quat
+    from planner.sim.execution import correct_cycle
 
     robot, s = short_plan.load_robot(), short_plan.samples
     kin = kinematics_of(robot)
@@ -521,8 +521,8 @@ def test_a_correction_keeps_a_leg_on_the_plans_other_knee(short_plan):
 def test_feedback_replans_the_rest_when_the_plans_steps_fail(short_plan, monkeypatch):
     """Every step fails from the measured state until the rest of the walk is planned anew
     from it (8.3): the walk then follows the new plan's steps onto its footholds."""
-    import planner.execution as execution
-    from planner.local.base import LocalPlanner
+    import planner.sim.execution as execution
+    from planner.planning.local import LocalPlanner
 
     real_step, real_replan = LocalPlanner.step, execution.replan_rest
     made = []
@@ -559,8 +559,8 @@ def test_feedback_replans_again_once_the_plans_steps_were_left(short_plan, monke
     steps; when its steps fail too, the rest is planned anew once more (REPLANS = 2; the
     second was never used: barrier9cm's recursive plan stalled 127 cm short so) and the
     walk follows that plan's steps."""
-    import planner.execution as execution
-    from planner.local.base import LocalPlanner
+    import planner.sim.execution as execution
+    from planner.planning.local import LocalPlanner
 
     real_step, real_replan = LocalPlanner.step, execution.replan_rest
     made = []
@@ -592,10 +592,10 @@ def test_a_replan_is_followed_only_when_it_reaches_the_goal(short_plan, monkeypa
     """replan_rest plans from a given state to the goal; where the soft planner stops short
     the recursive one is asked; a re-plan that stops short (its own dead end) is not
     returned, so feedback does not walk into it."""
-    from planner.execution import _planned_settings, replan_rest
-    from planner.local.base import LocalPlanner
-    from planner.local.soft import SoftPlanner
-    from planner.trajectory import Trajectory
+    from planner.motion.trajectory import Trajectory
+    from planner.planning.local import LocalPlanner
+    from planner.planning.soft import SoftPlanner
+    from planner.sim.execution import _planned_settings, replan_rest
 
     robot, terrain = short_plan.load_robot(), short_plan.load_terrain()
     st = _planned_settings(short_plan)
@@ -626,7 +626,7 @@ def test_a_replan_is_followed_only_when_it_reaches_the_goal(short_plan, monkeypa
 def test_planned_body_poses_are_the_plans_at_each_step(short_plan):
     """Each step's body pose is one the plan passes in that step (the swing keyframe's),
     with every foot on the ground where that step starts (the Theta2 hint of feedback)."""
-    from planner.execution import planned_body_poses
+    from planner.sim.execution import planned_body_poses
 
     steps, poses = planned_steps(short_plan), planned_body_poses(short_plan)
     cycles, s = plan_step_cycles(short_plan), short_plan.samples
@@ -646,8 +646,8 @@ def test_a_correction_turns_the_body_from_its_measured_attitude(short_plan):
     """8.4 from a body yawed 12 degrees and 8 mm off the plan's (feet where planned): the
     corrected base starts at the measured pose, reaches the plan's when the first leg
     lifts, and the stance feet stay on their measured centres throughout."""
-    from planner.execution import _foot_centres, correct_cycle
-    from planner.lie import quat_from_rotation, rotation_from_quat, rotation_from_vector
+    from planner.core.lie import quat_from_rotation, rotation_from_quat, rotation_from_vector
+    from planner.sim.execution import _foot_centres, correct_cycle
 
     robot, s = short_plan.load_robot(), short_plan.samples
     a, b = plan_step_cycles(short_plan)[1]
@@ -656,7 +656,7 @@ def test_a_correction_turns_the_body_from_its_measured_attitude(short_plan):
     # the measured robot: the plan's first sample, base turned about its own centre
     R = rotation_from_vector([0.0, 0.0, np.radians(12.0)]) @ rotation_from_quat(q_plan[0, 3:7])
     p = q_plan[0, :3] + np.array([0.0, 0.008, 0.0])
-    from planner.kinematics import kinematics_of
+    from planner.body.kinematics import kinematics_of
 
     kin = kinematics_of(robot)
     ik = [kin.ik_leg(i, R.T @ (centres[0, i] - p)) for i in range(4)]
@@ -680,10 +680,10 @@ def test_a_correction_moves_the_body_toward_a_foot_out_of_reach(short_plan, monk
     stalled). The corrected body moves toward it by one offset (at most REACH_SHIFT_M),
     taken on over the four-feet phase from the measured pose, and FK of the corrected
     joints puts the stance feet on their measured centres plus the plan's rolling."""
-    import planner.execution as execution
-    from planner.execution import REACH_SHIFT_M, _foot_centres, correct_cycle
-    from planner.kinematics import kinematics_of
-    from planner.lie import rotation_from_quat
+    import planner.sim.execution as execution
+    from planner.body.kinematics import kinematics_of
+    from planner.core.lie import rotation_from_quat
+    from planner.sim.execution import REACH_SHIFT_M, _foot_centres, correct_cycle
 
     robot, s = short_plan.load_robot(), short_plan.samples
     kin = kinematics_of(robot)
@@ -720,8 +720,8 @@ def test_a_corrected_swing_keeps_the_plans_joints_where_ik_leaves_them(short_pla
     """8.4 re-solves a swing sample by IK; where IK answers with another solution than the
     plan's (step10cm's recursive plan: the HR knee 66 degrees off, the foot on the step's
     edge, a fall) the swing leg keeps the plan's joints; small corrections are IK's."""
-    from planner.execution import SWING_JUMP_RAD, correct_cycle
-    from planner.kinematics import kinematics_of
+    from planner.body.kinematics import kinematics_of
+    from planner.sim.execution import SWING_JUMP_RAD, correct_cycle
 
     robot, s = short_plan.load_robot(), short_plan.samples
     a, b = plan_step_cycles(short_plan)[1]
@@ -755,8 +755,8 @@ def test_a_feedback_run_that_executes_nothing_ends_standing(short_plan, monkeypa
     """No step succeeds from the measured state and the plan's steps are not corrected:
     the run stops stuck, judged on the settled start it held (it raised an IndexError from
     the monitor's empty reference), and says so in one line."""
-    import planner.execution as execution
-    from planner.local.base import LocalPlanner
+    import planner.sim.execution as execution
+    from planner.planning.local import LocalPlanner
 
     real = LocalPlanner.step
 

@@ -1,21 +1,21 @@
 """The three-leg stability margin: numpy against the statics polygon distance, CasADi
-against numpy, and Theta2 keeping it (planner.stability)."""
+against numpy, and Theta2 keeping it (planner.body.stability)."""
 
 import casadi as ca
 import numpy as np
 import pytest
 
-from planner import statics
-from planner.problems import Theta2, Theta4
-from planner.problems.base import FEASIBILITY_TOL
-from planner.robot import load_robot
-from planner.stability import (
+from planner.body import statics
+from planner.body.robot import load_robot
+from planner.body.stability import (
     BALANCE_MARGIN_M,
     support_margin_m,
     support_margins_ca,
     triangle_inradius_m,
 )
-from planner.terrain import load_terrain
+from planner.problems import Theta2, Theta4
+from planner.problems.base import FEASIBILITY_TOL
+from planner.world.terrain import load_terrain
 
 
 def _placed(dog, name, x):
@@ -110,7 +110,7 @@ def test_inradius_is_the_largest_margin_in_the_triangle():
 
 def test_a_triangle_narrower_than_the_margin_holds_no_com(dog):
     """The look-ahead of LocalPlanner.leaves_no_support against Theta2 itself."""
-    from planner.local.soft import SoftPlanner
+    from planner.planning.soft import SoftPlanner
 
     terrain, placed, u_f, u_n = _placed(dog, "flat", 0.3)
     start = placed.state.copy()
@@ -129,7 +129,7 @@ def test_a_triangle_narrower_than_the_margin_holds_no_com(dog):
 
 def test_polygon_margin_is_the_triangle_margin_and_the_hull_margin(rng):
     """Three feet: :func:`support_margin_m`, inside and out; four: the hull's edges."""
-    from planner.stability import polygon_margin_m
+    from planner.body.stability import polygon_margin_m
 
     for _ in range(200):
         tri = rng.uniform(-0.2, 0.2, size=(3, 3))
@@ -146,7 +146,7 @@ def test_nearest_inside_point_against_a_dense_grid(rng):
     """The point nearest a target among those ``margin`` inside the feet's hull: compared
     with the best of a dense grid filtered by :func:`polygon_margin_m` (an independent
     reference), inside (the target itself), outside, and for an empty inset."""
-    from planner.stability import nearest_inside_point_W, polygon_margin_m
+    from planner.body.stability import nearest_inside_point_W, polygon_margin_m
 
     gx, gy = np.meshgrid(np.linspace(-0.3, 0.3, 121), np.linspace(-0.3, 0.3, 121))
     grid = np.c_[gx.ravel(), gy.ravel()]

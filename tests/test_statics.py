@@ -1,4 +1,4 @@
-"""Tests of planner.statics: eq. 3-5 forces, section 7.3 (d), (e), sigma5, exact SOCP."""
+"""Tests of planner.body.statics: eq. 3-5 forces, section 7.3 (d), (e), sigma5, exact SOCP."""
 
 from __future__ import annotations
 
@@ -9,8 +9,7 @@ import numpy as np
 import pytest
 from scipy.optimize import linprog
 
-from planner.errors import InputError, PlannerError
-from planner.statics import (
+from planner.body.statics import (
     GRAVITY_W,
     DegenerateStanceError,
     equilibrating_forces,
@@ -25,6 +24,7 @@ from planner.statics import (
     static_feasibility,
     support_indices,
 )
+from planner.core.errors import InputError, PlannerError
 
 G = np.array(GRAVITY_W)
 MASS = 2.5

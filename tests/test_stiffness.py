@@ -1,14 +1,14 @@
-"""Sway stiffness of a stance (planner.stiffness) against finite differences and MuJoCo."""
+"""Sway stiffness of a stance (planner.body.stiffness) against finite differences and MuJoCo."""
 
 import casadi as ca
 import numpy as np
 import pinocchio as pin
 import pytest
 
-from planner.kinematics import kinematics_of
-from planner.lie import rotation_from_vector
-from planner.stiffness import SwayStiffness, joint_sway_matrix_ca
-from planner.torques import TorqueCheck, holding_load
+from planner.body.kinematics import kinematics_of
+from planner.body.stiffness import SwayStiffness, joint_sway_matrix_ca
+from planner.body.torques import TorqueCheck, holding_load
+from planner.core.lie import rotation_from_vector
 
 
 @pytest.fixture(scope="module")
@@ -143,7 +143,7 @@ def _critical_kp(robot, q, support, tau) -> float:
 
 def _hold_three_legs(plan, q, support, kp) -> float:
     """MuJoCo: hold the stance on its three legs for 1.5 s; the body's drift [m]."""
-    from planner.simulate import SimSettings, Simulator
+    from planner.sim.simulate import SimSettings, Simulator
 
     robot = plan.load_robot()
     settings = SimSettings(kp_nm_per_rad=kp, kv_nm_s_per_rad=0.25 * kp / 20.0).check()
@@ -175,8 +175,8 @@ def test_mujoco_holds_a_stance_only_above_the_critical_stiffness(stance):
 
 
 def test_check_reports_the_least_three_leg_sway_stiffness(short_flat_walk):
-    from planner.stiffness import sway_stiffness_of
-    from planner.validate import check_plan
+    from planner.body.stiffness import sway_stiffness_of
+    from planner.planfile.validate import check_plan
 
     _, plan, _ = short_flat_walk
     report = check_plan(plan)

@@ -1,4 +1,5 @@
-"""Tests of planner.terrain / planner.heightfield / planner.terrain_plot (paper 4.4-4.5)."""
+"""Tests of planner.world.terrain / planner.world.heightfield / planner.replay.terrain_plot (paper
+4.4-4.5)."""
 
 from __future__ import annotations
 
@@ -12,9 +13,10 @@ import pytest
 import yaml
 from PIL import Image
 
-from planner.bench_courses import HARD_COURSES
-from planner.errors import InputError, TerrainError
-from planner.terrain import (
+from planner.bench.courses import HARD_COURSES
+from planner.core.errors import InputError, TerrainError
+from planner.replay.terrain_plot import plot_top_view
+from planner.world.terrain import (
     NP,
     Terrain,
     body_clearance,
@@ -24,7 +26,6 @@ from planner.terrain import (
     min_body_clearance,
     terrains_dir,
 )
-from planner.terrain_plot import plot_top_view
 
 NAMED = [
     "flat",

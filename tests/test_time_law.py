@@ -1,4 +1,4 @@
-"""The time law of planned paths (planner.time_law): against closed-form motion profiles and
+"""The time law of planned paths (planner.motion.time_law): against closed-form motion profiles and
 the caps, and the plan's samples against the URDF's joint speed limits."""
 
 import math
@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from planner.time_law import (
+from planner.motion.time_law import (
     JOINT_SPEED_FRACTION,
     LANDING_FRACTION,
     body_profile,
@@ -105,7 +105,7 @@ def test_a_swing_lands_at_its_landing_speed_and_lasts_its_least():
 def test_a_planned_walk_keeps_its_joints_and_body_within_the_law(short_flat_walk, littledog):
     """Every sample interval of a plan: joints within JOINT_SPEED_FRACTION of the URDF's
     limits, the base within its peak speed in body moves and in the swings that overlap
-    their body moves' ends (planner.local.overlap); the plan records the law's settings."""
+    their body moves' ends (planner.planning.overlap); the plan records the law's settings."""
     _, plan, _ = short_flat_walk
     t, q, contact = plan.samples.time, plan.samples.q, plan.samples.contact
     settings = plan.stats["settings"]
@@ -125,11 +125,11 @@ def test_a_planned_walk_keeps_its_joints_and_body_within_the_law(short_flat_walk
 @pytest.mark.parametrize("overlap", [0.0, 1.0])
 def test_the_executor_times_a_step_as_the_planner_does(littledog, overlap):
     """Feedback (8.3) follows a step at the times the walk records for it, its swing
-    overlapping the body move's end or not (planner.local.overlap)."""
-    from planner.local.base import LocalSettings, Walk
-    from planner.local.soft import SoftPlanner
-    from planner.terrain import load_terrain
-    from planner.trajectory import Trajectory
+    overlapping the body move's end or not (planner.planning.overlap)."""
+    from planner.motion.trajectory import Trajectory
+    from planner.planning.local import LocalSettings, Walk
+    from planner.planning.soft import SoftPlanner
+    from planner.world.terrain import load_terrain
 
     terrain = load_terrain("flat")
     planner = SoftPlanner(littledog, terrain, settings=LocalSettings(swing_overlap=overlap))
@@ -155,7 +155,7 @@ def test_the_executor_times_a_step_as_the_planner_does(littledog, overlap):
 def test_the_carried_acceleration_is_the_largest_that_keeps_the_margin():
     """Against a concave margin with a known root: the cap when it holds there, else the
     bisection's lower end within cap / 2^iters of the root, never above it."""
-    from planner.time_law import carried_accel_m_s2
+    from planner.motion.time_law import carried_accel_m_s2
 
     def margin(a):
         return 5.0 - 4.0 * a * a  # >= 1 up to a = 1
@@ -173,11 +173,11 @@ def test_a_body_move_on_a_slope_accelerates_only_as_its_feet_can_carry(littledog
     law asks, checked directly with eq. 4 under gravity g - a u (static_feasibility)."""
     from dataclasses import replace
 
-    from planner.local.soft import SoftPlanner
-    from planner.statics import static_feasibility
-    from planner.terrain import Terrain
-    from planner.time_law import CARRIED_SHARE
-    from planner.trajectory import Trajectory
+    from planner.body.statics import static_feasibility
+    from planner.motion.time_law import CARRIED_SHARE
+    from planner.motion.trajectory import Trajectory
+    from planner.planning.soft import SoftPlanner
+    from planner.world.terrain import Terrain
 
     slope = Terrain.from_spec(
         {
@@ -223,15 +223,15 @@ def test_a_body_move_on_a_slope_accelerates_only_as_its_feet_can_carry(littledog
             floor = max(need, CARRIED_SHARE * marg(g))
             assert marg(g - a * u) >= floor - 1e-6
     # the check binds: without it (every interval at the cap) the move is quicker
-    monkeypatch.setattr("planner.time_law.carried_accel_m_s2", lambda margin, cap, need: cap)
+    monkeypatch.setattr("planner.motion.time_law.carried_accel_m_s2", lambda margin, cap, need: cap)
     assert planner.body_offsets_s(path)[-1] < t[-1] - 1e-3
 
 
 def test_feedback_replans_with_the_settings_the_plan_was_made_with():
     """A plan made with a gentler time law and another gait is walked with them (8.3)."""
-    from planner.execution import _planned_settings
-    from planner.local.base import LocalSettings
-    from planner.walk import plan_walk
+    from planner.planning.local import LocalSettings
+    from planner.planning.walk import plan_walk
+    from planner.sim.execution import _planned_settings
 
     settings = LocalSettings(body_accel_m_s2=0.2, swing_time_s=0.7, gait=(0, 3, 1, 2))
     plan, report = plan_walk("littledog", "flat", (0.3, 0.0), (0.2, 0.0), settings=settings)
@@ -248,11 +248,11 @@ def test_a_move_braking_toward_an_edge_keeps_the_zero_moment_point_inside(little
     (COM - h a / g on flat ground), stays inside by the floor the law asks."""
     from dataclasses import replace
 
-    from planner.local.soft import SoftPlanner
-    from planner.stability import PATH_BALANCE_MARGIN_M, polygon_margin_m
-    from planner.terrain import load_terrain
-    from planner.time_law import CARRIED_SHARE
-    from planner.trajectory import Trajectory
+    from planner.body.stability import PATH_BALANCE_MARGIN_M, polygon_margin_m
+    from planner.motion.time_law import CARRIED_SHARE
+    from planner.motion.trajectory import Trajectory
+    from planner.planning.soft import SoftPlanner
+    from planner.world.terrain import load_terrain
 
     flat = load_terrain("flat")
     planner = SoftPlanner(littledog, flat)
@@ -289,11 +289,11 @@ def test_a_body_move_over_an_edge_goes_no_faster_than_its_clearance_allows(littl
     every interval the base's mean speed is at most the clearance beyond BODY_CLEARANCE_M
     over BODY_LAG_S (the clearance measured here on a 1 mm grid of the body box's bottom
     face); over flat ground the clearance is ample and the law is the plain one."""
-    from planner.local.base import BODY_CLEARANCE_M
-    from planner.local.soft import SoftPlanner
-    from planner.terrain import Terrain, load_terrain
-    from planner.time_law import BODY_LAG_S
-    from planner.trajectory import Trajectory
+    from planner.motion.time_law import BODY_LAG_S
+    from planner.motion.trajectory import Trajectory
+    from planner.planning.local import BODY_CLEARANCE_M
+    from planner.planning.soft import SoftPlanner
+    from planner.world.terrain import Terrain, load_terrain
 
     flat = load_terrain("flat")
     planner = SoftPlanner(littledog, flat)

@@ -1,19 +1,19 @@
-"""Joint torques of a stance (planner.torques) against Pinocchio's RNEA and the validator."""
+"""Joint torques of a stance (planner.body.torques) against Pinocchio's RNEA and the validator."""
 
 import numpy as np
 import pinocchio as pin
 import pytest
 
-from planner.plan import Plan
-from planner.robot import load_robot
-from planner.statics import equilibrating_forces
-from planner.torques import TorqueCheck, joint_efforts_nm
-from planner.validate import check_plan
+from planner.body.robot import load_robot
+from planner.body.statics import equilibrating_forces
+from planner.body.torques import TorqueCheck, joint_efforts_nm
+from planner.planfile.plan import Plan
+from planner.planfile.validate import check_plan
 
 
 @pytest.fixture(scope="module")
 def flat_plan(tmp_path_factory):
-    from planner.walk import plan_walk
+    from planner.planning.walk import plan_walk
 
     plan, report = plan_walk("littledog", "flat", goal_xy=(0.4, 0.0))
     assert report.ok
@@ -89,7 +89,7 @@ def test_commanded_forces_keep_a_friction_reserve(flat_plan, littledog, monkeypa
     COMMANDED_FRICTION_SHARES x mu (the rest a reserve for the servos' errors) that balance
     the robot loading no joint beyond COMMANDED_TORQUE_FRACTION, else in the whole cone.
     Balance by RNEA; the cones measured on the forces."""
-    import planner.torques as torques
+    import planner.body.torques as torques
 
     tilt = np.radians(18.0)
     n = np.tile([-np.sin(tilt), 0.0, np.cos(tilt)], (4, 1))  # uphill in +x
@@ -187,7 +187,7 @@ def test_least_squares_without_active_cones_is_the_socp(flat_plan, littledog, co
     Clarabel's SOCP (to its tolerance), taken for most stances; where a cone is active
     the SOCP is solved.
     """
-    from planner.terrain import load_terrain
+    from planner.world.terrain import load_terrain
 
     terrain = load_terrain(course)
     tc = TorqueCheck(littledog)
@@ -262,8 +262,8 @@ def test_symbolic_least_squares_torques_equal_the_socp(flat_plan, littledog):
     import casadi as ca
     from scipy.spatial.transform import Rotation
 
-    from planner.kinematics import kinematics_of
-    from planner.torques import least_squares_ratios_ca
+    from planner.body.kinematics import kinematics_of
+    from planner.body.torques import least_squares_ratios_ca
 
     kin = kinematics_of(littledog)
     effort = joint_efforts_nm(littledog)

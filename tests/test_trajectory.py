@@ -4,14 +4,14 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from planner.errors import InputError
-from planner.trajectory import Trajectory
+from planner.core.errors import InputError
+from planner.motion.trajectory import Trajectory
 
 H_M = 0.15  # body height above the terrain used below [m]
 
 
 class _Heights:
-    """Test double of planner.terrain.Terrain, heights only."""
+    """Test double of planner.world.terrain.Terrain, heights only."""
 
     def __init__(self, fn):
         self._fn = fn
@@ -185,7 +185,7 @@ def test_invalid_sine_coefficients_and_straight_inputs():
 
 @pytest.mark.parametrize("name", ["flat", "step5cm", "gap6cm", "slope10"])
 def test_straight_on_the_real_terrains(name):
-    terrain = pytest.importorskip("planner.terrain").load_terrain(name)
+    terrain = pytest.importorskip("planner.world.terrain").load_terrain(name)
     tau = Trajectory.straight([0.0, 0.0], [2.0, 0.0], terrain, H_M, footprint_radius_m=0.1)
     w = tau.waypoints_W
     # never closer than H_M to the (sharp) ground under it

@@ -1,4 +1,4 @@
-"""The two-beat crawl's body targets (issue 16, planner.heuristics.two_beat_xy_W).
+"""The two-beat crawl's body targets (issue 16, planner.motion.heuristics.two_beat_xy_W).
 
 Checked against independent references: the Chebyshev centre against a dense grid of the
 support margins, the walk against the validator (``check``), the paper's centroid targets
@@ -8,17 +8,17 @@ support margins, the walk against the validator (``check``), the paper's centroi
 import numpy as np
 import pytest
 
-from planner.heuristics import chebyshev_centre_xy, two_beat_xy_W
-from planner.local.base import LocalSettings
-from planner.stability import (
+from planner.body.stability import (
     BALANCE_MARGIN_M,
     polygon_margin_m,
     support_margin_m,
     tip_margin_m,
     triangle_inradius_m,
 )
-from planner.state import State
-from planner.walk import plan_walk
+from planner.body.state import State
+from planner.motion.heuristics import chebyshev_centre_xy, two_beat_xy_W
+from planner.planning.local import LocalSettings
+from planner.planning.walk import plan_walk
 
 
 def _grid_best(triangles, lo, hi, n=401):
@@ -158,7 +158,7 @@ def test_two_beat_keyframes_keep_the_balance_margin(walks, littledog):
 
 
 def test_two_beat_walk_holds_up_in_mujoco(walks):
-    from planner.simulate import run_open_loop
+    from planner.sim.simulate import run_open_loop
 
     m = run_open_loop(walks["two_beat"]).metrics
     assert m.reached and m.final_error_m < 0.03, m.summary()
@@ -169,11 +169,11 @@ def test_theta2_hold_checks_the_start_itself(walks):
     """Theta2.hold at a three-leg keyframe of the walk (the body already there): feasible,
     the same pose and joints; at a four-feet keyframe whose COM lies on a diagonal of the
     stance: the balance margin is what it misses."""
-    from planner.heuristics import reference_directions
-    from planner.local.soft import SoftPlanner
-    from planner.robot import load_robot
-    from planner.terrain import load_terrain
-    from planner.trajectory import Trajectory
+    from planner.body.robot import load_robot
+    from planner.motion.heuristics import reference_directions
+    from planner.motion.trajectory import Trajectory
+    from planner.planning.soft import SoftPlanner
+    from planner.world.terrain import load_terrain
 
     robot, terrain = load_robot("littledog"), load_terrain("flat")
     planner = SoftPlanner(robot, terrain)
@@ -199,10 +199,10 @@ def test_long_strides_only_over_level_ground(littledog):
     """``level_stride``: the long stride on flat ground; the default for the front legs
     about to cross step5cm's 5 cm step (at x = 0.8 m); on rough2cm both, and where long,
     the ground along the foot's track (every mm) within 5 mm of the feet's plane."""
-    from planner.heuristics import support_plane_W
-    from planner.local.soft import SoftPlanner
-    from planner.terrain import load_terrain
-    from planner.trajectory import Trajectory
+    from planner.motion.heuristics import support_plane_W
+    from planner.motion.trajectory import Trajectory
+    from planner.planning.soft import SoftPlanner
+    from planner.world.terrain import load_terrain
 
     long = 0.67 * float(np.min(littledog.reach_m))
 
@@ -250,9 +250,9 @@ def test_fast_settings_apply_over_level_ground_only(littledog):
     ground the two-beat's and the level settings."""
     from dataclasses import replace
 
-    from planner.local.soft import SoftPlanner
-    from planner.terrain import load_terrain
-    from planner.trajectory import Trajectory
+    from planner.motion.trajectory import Trajectory
+    from planner.planning.soft import SoftPlanner
+    from planner.world.terrain import load_terrain
 
     fast = LocalSettings(
         com_target="two_beat", level_body_accel_m_s2=1.5, level_clearance_m=0.02,

@@ -5,20 +5,20 @@ import io
 import numpy as np
 import pytest
 
-from planner.interpolate import interpolate_leaf, interpolate_swing
-from planner.kinematics import kinematics_of
-from planner.links import LegLinks, leg_links
-from planner.plan import Plan
-from planner.problems import Theta2, Theta3, Theta4
-from planner.rolling import end_keyframe
-from planner.terrain import load_terrain
-from planner.validate import (
+from planner.body.kinematics import kinematics_of
+from planner.body.links import LegLinks, leg_links
+from planner.body.rolling import end_keyframe
+from planner.motion.interpolate import interpolate_leaf, interpolate_swing
+from planner.planfile.plan import Plan
+from planner.planfile.validate import (
     CheckTolerances,
     check_plan,
     contact_points_from_centres,
     main_check,
     sharp_surface_distance,
 )
+from planner.problems import Theta2, Theta3, Theta4
+from planner.world.terrain import load_terrain
 
 N = 12  # samples per leaf
 OUTCOME = {"reached_goal": True, "distance_to_goal": 0.0, "message": "test plan"}
@@ -40,7 +40,7 @@ def make_plan(dog, terrain_name, x, step_m, land_x=None):
     placed = theta3.solve(b, b.feet_W[0] + [step_m, 0.0, 0.0], x0=theta3.initial_guess(b))
     assert placed.feasible, placed.diagnosis
     c = placed.state
-    move = interpolate_leaf(dog, terrain, a, b, N)  # the stance feet roll (planner.rolling)
+    move = interpolate_leaf(dog, terrain, a, b, N)  # the stance feet roll (planner.body.rolling)
     b = end_keyframe(dog, move, (1, 2, 3))
     c.feet_W[1:], c.joints_rad[1:] = b.feet_W[1:], b.joints_rad[1:]
     swing = interpolate_swing(dog, terrain, b, c, N)
@@ -260,7 +260,7 @@ def test_contact_points_from_either_convention():
     terrain = load_terrain("slope10")
     rho = 0.0103
     r = np.array([[1.5, 0.1, float(terrain.height(1.5, 0.1))]])
-    from planner.contact import contact_from_foot_centre, foot_centre_from_contact
+    from planner.body.contact import contact_from_foot_centre, foot_centre_from_contact
 
     c = foot_centre_from_contact(terrain, r, rho)
     contacts, miss = contact_points_from_centres(terrain, c, rho)
@@ -291,10 +291,10 @@ def test_a_knee_flipping_between_two_clear_samples_through_a_wall_fails(flat_pla
     samples, for check and for the planner's own path check."""
     import pinocchio as pin
 
-    from planner.interpolate import between_q
-    from planner.local.soft import SoftPlanner
-    from planner.state import State
-    from planner.terrain import Terrain
+    from planner.body.state import State
+    from planner.motion.interpolate import between_q
+    from planner.planning.soft import SoftPlanner
+    from planner.world.terrain import Terrain
 
     plan, k, q = _knee_flipped_mid_swing(flat_plan, littledog)
     links = LegLinks(littledog)
@@ -331,10 +331,10 @@ def test_a_swing_foot_swept_through_the_ground_between_two_samples_fails(flat_pl
     check so and fell in MuJoCo: the foot struck the trench's floor between two samples.)"""
     import pinocchio as pin
 
-    from planner.interpolate import between_q
-    from planner.local.soft import SoftPlanner
-    from planner.state import State
-    from planner.terrain import Terrain
+    from planner.body.state import State
+    from planner.motion.interpolate import between_q
+    from planner.planning.soft import SoftPlanner
+    from planner.world.terrain import Terrain
 
     plan, k, q = _knee_flipped_mid_swing(flat_plan, littledog)
     kin = kinematics_of(littledog)

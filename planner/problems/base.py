@@ -32,11 +32,11 @@ import casadi as ca
 import numpy as np
 import pinocchio as pin
 
-from planner import statics
-from planner.kinematics import kinematics_of
-from planner.lie import coords_from_pose, pose_from_coords, rotation_from_vector_ca
-from planner.options import ThetaOptions
-from planner.state import State
+from planner.body import statics
+from planner.body.kinematics import kinematics_of
+from planner.body.state import State
+from planner.core.lie import coords_from_pose, pose_from_coords, rotation_from_vector_ca
+from planner.problems.options import ThetaOptions
 
 FEASIBILITY_TOL = 1e-6  # [m, rad, N]: an independent violation above this is infeasible
 CLEARANCE_ACTIVE_POINTS = 8  # points of P held besides its bottom corners (2 per quarter)
@@ -46,7 +46,7 @@ CLEARANCE_ROUNDS = 4  # solves at most, each one re-picking the lowest points
 WITNESS_SLACK_M = 0.001
 # a swing leg's touch-down joints keep this far inside the URDF limits [rad]: at a limit the
 # leg cannot lift its foot off again along the normal (the swing's pre-pose,
-# planner.leg_swing) nor correct a tracking error; a landing onto a 10 cm step put the hip
+# planner.motion.leg_swing) nor correct a tracking error; a landing onto a 10 cm step put the hip
 # roll at its -0.6 rad stop, and no swing path reached it
 LANDING_LIMIT_MARGIN_RAD = 0.1
 
@@ -131,11 +131,11 @@ class ConstraintCheck:
     def leg_clearance(self, state: State, legs) -> tuple[float, list]:
         """Margin minus clearance of the given legs' capsules [m], if positive.
 
-        The margin is :mod:`planner.links`' keyframe margin (2 mm + 3 degrees x distance
-        to the foot). Also returns every capsule's :class:`planner.links.Witness` (None
-        when farther than ``planner.links.WITNESS_SEARCH_M`` or not of these legs).
+        The margin is :mod:`planner.body.links`' keyframe margin (2 mm + 3 degrees x distance
+        to the foot). Also returns every capsule's :class:`planner.body.links.Witness` (None
+        when farther than ``planner.body.links.WITNESS_SEARCH_M`` or not of these legs).
         """
-        from planner.links import leg_links
+        from planner.body.links import leg_links
 
         links = leg_links(self.robot)
         legs = set(legs)
@@ -152,7 +152,7 @@ class ConstraintCheck:
 
     def contacts(self, state: State, legs) -> float:
         """Stance feet: Pinocchio's sphere centre equals contact point + rho n."""
-        from planner.contact import foot_centre_from_contact
+        from planner.body.contact import foot_centre_from_contact
 
         centres = self.foot_centres_W(state)
         want = foot_centre_from_contact(self.terrain, state.feet_W, self.robot.foot_radius_m)
@@ -284,20 +284,20 @@ class ThetaProblem:
     def constrain_leg_links(self, pos, R, thetas: dict, name: str = "leg_clearance") -> None:
         """Thigh and shank capsules of the legs in ``thetas`` (leg -> its 3 joint SX) clear.
 
-        Beyond the paper (planner.links): for each capsule a half-space constraint
+        Beyond the paper (planner.body.links): for each capsule a half-space constraint
         n . (a + u (b - a) - w) >= radius + margin + WITNESS_SLACK_M, with w the
         sharp-terrain point nearest the capsule's axis, n the unit vector from w to the
         axis and u where along the axis (parameters, :meth:`solve_rounds` picks them at
         each round from the pose reached: constraint generation, as for the body's
         clearance points). At the witness this is the exact distance; elsewhere the plane
         is a conservative local model of the terrain. A capsule farther than
-        ``planner.links.WITNESS_SEARCH_M`` gets an inactive row (n = 0). The margin grows
-        with the witness's distance from the leg's foot (planner.links'
+        ``planner.body.links.WITNESS_SEARCH_M`` gets an inactive row (n = 0). The margin grows
+        with the witness's distance from the leg's foot (planner.body.links'
         ``KEYFRAME_ANGLE_RAD``): execution errors turn a stance leg about its foot.
         ``name`` names the constraint group; the pose whose witnesses are used is
         :meth:`_link_state` of it (the solution's, or another pose of the same solve).
         """
-        from planner.links import leg_links
+        from planner.body.links import leg_links
 
         links = leg_links(self.robot)
         caps = [c for c, cap in enumerate(links.capsules) if cap.leg in thetas]
@@ -319,7 +319,7 @@ class ThetaProblem:
 
     def _link_witness_params(self, witnesses: list, name: str = "leg_clearance") -> np.ndarray:
         """The witness block of group ``name`` (:meth:`constrain_leg_links`), 8 per capsule."""
-        from planner.links import leg_links
+        from planner.body.links import leg_links
 
         links = leg_links(self.robot)
         out = []
@@ -566,7 +566,7 @@ class ThetaProblem:
             "swing_ready": ": the swinging leg's next foothold is out of its reach from here",
             "torque": ": a support joint would need more than torque_fraction of its effort"
             " limit on three legs",
-            "sway": ": the three-leg stance is too soft on the servos (planner.stiffness)",
+            "sway": ": the three-leg stance is too soft on the servos (planner.body.stiffness)",
         }
         for key, text in hints.items():
             if group.startswith(key):
@@ -639,7 +639,8 @@ def contact_on_terrain_ca(height_fun: ca.Function, contact_xy, radius_m: float):
 
     The contact point r = (x, y, z_T(x, y)) is parametrised by its horizontal position
     (decision variables), so f_T(r) = 0 holds exactly; the foot sphere's centre is then
-    r + rho n(r), n the pseudo-normal, exactly as :func:`planner.contact.foot_centre_from_contact`
+    r + rho n(r), n the pseudo-normal, exactly as
+    :func:`planner.body.contact.foot_centre_from_contact`
     computes it. Returns (contact_W, centre_W, normal_W, slope2) with slope2 = tan^2 of
     the terrain's inclination at r (bounded by mu^2 in section 7.4).
     """

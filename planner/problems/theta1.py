@@ -6,14 +6,14 @@ through the footholds, the joints) is searched. Same variables and constraints a
 COM fixed the eq. 5 forces are fixed too, so (as the paper says) they are checked once
 before solving: if they leave the cones, no orientation can help and the solve is skipped.
 On three legs the precheck also asks the COM ``options.balance_margin_m`` inside the support
-triangle (:mod:`planner.stability`): Omega's largest feasible lambda then stops short of
+triangle (:mod:`planner.body.stability`): Omega's largest feasible lambda then stops short of
 the edge by that margin instead of at it.
 Objective: sigma1 * sigma2 * sigma3 (as logs).
 
 Beyond the paper, ``height_band_m`` > 0 pins only the COM's horizontal position to r_c*
 (its height within the band, preferring r_c*'s by sigma4, the eq. 5 forces then checked in
 the problem as Theta2 does): tau is a path over the ground whose height the planner only
-guesses (:func:`planner.heuristics.support_body_target_W`), and a COM pinned 7 mm too high
+guesses (:func:`planner.motion.heuristics.support_body_target_W`), and a COM pinned 7 mm too high
 left a leg out of reach on slope10. The default 0 is eq. 7 as written.
 """
 
@@ -23,11 +23,11 @@ import time
 
 import numpy as np
 
-from planner import statics
+from planner.body import statics
+from planner.body.stability import support_margin_m
+from planner.body.state import State
 from planner.problems.base import ThetaSolution
 from planner.problems.theta2 import Theta2
-from planner.stability import support_margin_m
-from planner.state import State
 
 
 class Theta1(Theta2):
@@ -57,7 +57,7 @@ class Theta1(Theta2):
                 return False, f"leg {i + 1}: eq. 5 normal force {fn:.3g} N below {fmin:.3g} N"
             if ft > self.mu * fn:
                 return False, f"leg {i + 1}: eq. 5 force outside the friction cone"
-        if len(self.support) == 3:  # and a margin from tipping (planner.stability)
+        if len(self.support) == 3:  # and a margin from tipping (planner.body.stability)
             have = support_margin_m(start.feet_W[list(self.support)], rc_star_W)
             if have < self.options.balance_margin_m:
                 return False, (

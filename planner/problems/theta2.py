@@ -23,7 +23,7 @@ Without it the body drifts to where the COM target wants it and leaves a lagging
 unable to reach its next foothold (the planner then stalls on steps and slopes).
 With ``landing=True`` it is also *landing-ready*: three more variables, the swing leg's
 joints at touch-down, must put its foot on the target's sphere centre from this body pose
-with its thigh and shank clear of the terrain (planner.links margins). Stepping down an
+with its thigh and shank clear of the terrain (planner.body.links margins). Stepping down an
 edge, the body then moves to where the shank can pass the edge, which Theta3 (body fixed)
 cannot do.
 
@@ -40,10 +40,13 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from planner import stability, statics
-from planner.heuristics import frame_from_directions
-from planner.kinematics import hip_point_B
-from planner.lie import coords_from_pose
+from planner.body import stability, statics
+from planner.body.kinematics import hip_point_B
+from planner.body.state import S0, State
+from planner.body.stiffness import joint_sway_matrix_ca, sway_stiffness_of
+from planner.body.torques import TorqueCheck, joint_efforts_nm, least_squares_ratios_ca
+from planner.core.lie import coords_from_pose
+from planner.motion.heuristics import frame_from_directions
 from planner.problems.base import (
     FEASIBILITY_TOL,
     ThetaOptions,
@@ -55,9 +58,6 @@ from planner.problems.base import (
     sigma3_ca,
     state_from_pose_coords,
 )
-from planner.state import S0, State
-from planner.stiffness import joint_sway_matrix_ca, sway_stiffness_of
-from planner.torques import TorqueCheck, joint_efforts_nm, least_squares_ratios_ca
 
 SWING_REACH_FRACTION = 0.92  # swing-ready: hip within this fraction of reach of the target
 NO_SWING_TARGET_M = 1e3  # reach bound that switches the swing-ready constraint off
@@ -239,7 +239,7 @@ class Theta2(ThetaProblem):
         """Support joints within ``torque_fraction`` of their effort (commanded forces).
 
         The servos get the effort-weighted least-squares forces as feed-forward
-        (:mod:`planner.torques`); a joint they load beyond its effort saturates. Joints
+        (:mod:`planner.body.torques`); a joint they load beyond its effort saturates. Joints
         without a finite effort are not constrained (and weigh as the strongest one).
         """
         effort = joint_efforts_nm(self.robot)
@@ -281,7 +281,7 @@ class Theta2(ThetaProblem):
         self.constrain("torque_forces", cone, 0.0, np.inf)
 
     def _constrain_sway(self, pos, R, th, centre_cols) -> None:
-        """The sway-stiffness bound as rows (:mod:`planner.stiffness`).
+        """The sway-stiffness bound as rows (:mod:`planner.body.stiffness`).
 
         H = K_joint(x) + G with K_joint the servos' part (exact, a function of the pose
         and joints) and G the gravity and feed-forward part, frozen at the pose being
@@ -312,7 +312,7 @@ class Theta2(ThetaProblem):
         S = sum_i (|rho_i|^2 I - rho_i rho_i^T) (non-singular unless the feet are
         collinear). S^-1 is computed once per solve from the footholds and passed as a
         parameter, so F_i = u x rho_i + w costs a few flops inside IPOPT. Equal to
-        :func:`planner.statics.equilibrating_forces` (tested).
+        :func:`planner.body.statics.equilibrating_forces` (tested).
         """
         weight = -self.robot.total_mass_kg * ca.DM(statics.GRAVITY_W)  # -m g
         if not hasattr(self, "_eq5_pars"):  # declared once, shared by every call
@@ -344,7 +344,7 @@ class Theta2(ThetaProblem):
         ``swing_target_W``: the contact point the swinging leg will be placed at (three
         supporting legs only); None switches the swing-ready constraint off.
         """
-        from planner.contact import foot_centre_from_contact
+        from planner.body.contact import foot_centre_from_contact
 
         centres = foot_centre_from_contact(self.terrain, start.feet_W, self.robot.foot_radius_m)
         values = {}
@@ -500,7 +500,8 @@ class Theta2(ThetaProblem):
     def _support_room_m(self, start: State) -> float:
         """The largest balance margin [m] any body pose has on ``start``'s three support feet.
 
-        The inradius of their horizontal triangle (:func:`planner.stability.triangle_inradius_m`);
+        The inradius of their horizontal triangle
+        (:func:`planner.body.stability.triangle_inradius_m`);
         inf where Theta2 keeps no balance margin (four feet, no force rows, a pinned COM).
         """
         if not self._keeps_balance_margin():
@@ -537,7 +538,8 @@ class Theta2(ThetaProblem):
     def hold(self, start: State, rc_star_W, u_f, u_n, swing_target_W=None) -> ThetaSolution:
         """Theta2's constraints at ``start`` itself: the body stays where it stands.
 
-        Beyond the paper (issue 16's two-beat crawl, :func:`planner.heuristics.two_beat_xy_W`):
+        Beyond the paper (issue 16's two-beat crawl,
+        :func:`planner.motion.heuristics.two_beat_xy_W`):
         where the COM already stands inside the three legs' triangle with margin, the
         optimum lies millimetres away, and a move of millimetres is a rest-to-rest body
         move all the same (0.08 s at 1.5 m/s^2). The start's pose and joints are checked

@@ -9,7 +9,7 @@ paper's free choice of the decreasing h_m made h_m(d) = exp(-d^2 / (2 l^2)), l =
 (flat ground), sigma3 as in :func:`~planner.problems.base.sigma3_ca`; as a sum of logs.
 
 For the recursive planner of 8.5 the ambition rho_3 scales the stride of the target
-(:mod:`planner.local.recursive`); the problem itself is unchanged.
+(:mod:`planner.planning.recursive`); the problem itself is unchanged.
 
 Beyond the paper: the touch-down joints are first sought ``LANDING_LIMIT_MARGIN_RAD``
 inside the URDF limits (:func:`~planner.problems.base.landing_bounds_rad`; a foot landed
@@ -24,6 +24,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from planner.body.state import State
 from planner.problems.base import (
     ThetaOptions,
     ThetaProblem,
@@ -34,7 +35,6 @@ from planner.problems.base import (
     sigma3_ca,
     terrain_height_function,
 )
-from planner.state import State
 
 NO_TARGET_RADIUS_M = 1e3  # target radius that leaves the constraint inactive [m]
 
@@ -131,7 +131,7 @@ class Theta3(ThetaProblem):
         point across it and stalls in the trench.
         """
         if target_W is not None:
-            from planner.contact import foot_centre_from_contact
+            from planner.body.contact import foot_centre_from_contact
 
             t = np.asarray(target_W, float).reshape(3).copy()
             t[2] = float(self.terrain.height(t[0], t[1]))

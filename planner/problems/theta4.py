@@ -12,8 +12,9 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from planner import statics
-from planner.lie import rotation_from_vector, vector_from_rotation
+from planner.body import statics
+from planner.body.state import S0, State
+from planner.core.lie import rotation_from_vector, vector_from_rotation
 from planner.problems.base import (
     ThetaOptions,
     ThetaProblem,
@@ -23,7 +24,6 @@ from planner.problems.base import (
     sigma3_ca,
     terrain_height_function,
 )
-from planner.state import S0, State
 
 
 class Theta4(ThetaProblem):

@@ -6,8 +6,8 @@ import argparse
 import math
 import time
 
-from planner.interrupts import Interrupts
-from planner.outputs import ROBOT_HELP, check_file
+from planner.core.interrupts import Interrupts
+from planner.core.outputs import ROBOT_HELP, check_file
 from planner.replay.page import write_html
 from planner.replay.scene import GEOMETRIES, build_scene
 from planner.replay.server import DEFAULT_HOST, ReplayServer, check_host
@@ -54,7 +54,7 @@ def add_replay_parser(subparsers) -> argparse.ArgumentParser:
 
 def cmd_replay(args) -> int:
     """Run ``stratawalk replay``: write the HTML file, or serve the walk until Ctrl-C."""
-    from planner.plan import Plan
+    from planner.planfile.plan import Plan
 
     host = None if args.html else check_host(args.host, args.allow_remote)
     if args.html is not None:

@@ -16,7 +16,7 @@ import json
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from planner.outputs import check_file, write_atomic
+from planner.core.outputs import check_file, write_atomic
 from planner.replay.scene import (
     COM_RGB,
     COMPARE_RGBA,
@@ -30,8 +30,8 @@ from planner.replay.scene import (
 )
 
 if TYPE_CHECKING:
-    from planner.plan import Plan
-    from planner.plots import PlanSeries
+    from planner.planfile.plan import Plan
+    from planner.replay.plots import PlanSeries
 
 __all__ = ["notebook_html", "scene_html", "write_html"]
 
@@ -196,7 +196,7 @@ def write_html(
     The options are :func:`planner.replay.scene.build_scene`'s. The file is written to a
     temporary name beside it and then renamed, so it is whole or absent.
     """
-    from planner.plan import Plan
+    from planner.planfile.plan import Plan
 
     plan = plan if isinstance(plan, Plan) else Plan.load(plan)
     scene = build_scene(

@@ -12,7 +12,7 @@
 - the support polygon of the feet on the ground, the whole-body COM and its ground
   projection (green inside the feasible COM region, red outside);
 - the contact forces of eqs. 3-5 as arrows, length in proportion to newtons, coloured by
-  their friction-cone margin (:func:`planner.plots.cone_margin`: green along the normal,
+  their friction-cone margin (:func:`planner.replay.plots.cone_margin`: green along the normal,
   yellow half-way, red on or outside the cone, inequalities (d)-(e) of 7.3);
 - the base path and the COM path, and the current stratum as a label over the robot;
 - optionally a second motion of the same robot on the same clock, see-through (``compare``:
@@ -34,14 +34,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from planner.errors import InputError, PlannerError
-from planner.plots import PlanSeries, plan_series
+from planner.core.errors import InputError, PlannerError
+from planner.replay.plots import PlanSeries, plan_series
 from planner.replay.tracks import SetAnimation, Tracks
 
 if TYPE_CHECKING:
     import meshcat
 
-    from planner.plan import Plan
+    from planner.planfile.plan import Plan
 
 __all__ = ["GEOMETRIES", "Scene", "build_scene", "STANCE_RGB", "SWING_RGB", "COM_RGB"]
 
@@ -308,7 +308,7 @@ def _robot(
     import pinocchio as pin
     from pinocchio.visualize import MeshcatVisualizer
 
-    from planner.robot import erd_robots_dir
+    from planner.body.robot import erd_robots_dir
 
     robot = plan.load_robot()
     dirs = [str(Path(robot.urdf_path).parent)]
@@ -345,7 +345,7 @@ def _robot(
 
 def _feet(plan: Plan, s: PlanSeries, root: meshcat.Visualizer, tr: Tracks) -> None:
     """A sphere around each foot: stance colour on the ground, swing colour in the air."""
-    from planner.robot import LEG_NAMES
+    from planner.body.robot import LEG_NAMES
 
     mg = _geometry().mg
     rho = float(plan.robot["foot_radius"])
@@ -362,7 +362,7 @@ def _support(s: PlanSeries, root: meshcat.Visualizer, tr: Tracks) -> None:
     """The polygon of the feet on the ground, one object per stance (shown while it lasts)."""
     mg = _geometry().mg
     # a stance lasts while the contact flags do (its feet roll by millimetres meanwhile,
-    # planner.rolling: the polygon of its first sample stands for it)
+    # planner.body.rolling: the polygon of its first sample stands for it)
     key = [s.contact[k].tobytes() for k in range(len(s))]
     starts = [0] + [k for k in range(1, len(s)) if key[k] != key[k - 1]]
     stops = starts[1:] + [len(s)]
@@ -426,8 +426,8 @@ def _forces(s: PlanSeries, root: meshcat.Visualizer, tr: Tracks, m_per_N: float,
     """
     from matplotlib import colormaps
 
-    from planner.lie import quat_from_rotation
-    from planner.robot import LEG_NAMES
+    from planner.body.robot import LEG_NAMES
+    from planner.core.lie import quat_from_rotation
 
     geo = _geometry()
     cmap = colormaps["RdYlGn"]

@@ -17,7 +17,7 @@ import sys
 import threading
 from typing import TYPE_CHECKING
 
-from planner.errors import InputError, PlannerError
+from planner.core.errors import InputError, PlannerError
 
 if TYPE_CHECKING:
     from planner.replay.scene import Scene

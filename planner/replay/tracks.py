@@ -58,7 +58,7 @@ class Tracks:
 
     def transform(self, path: str, matrices: NDArray, times=None) -> None:
         """Position and quaternion tracks from homogeneous transforms (n, 4, 4)."""
-        from planner.lie import quat_from_rotation
+        from planner.core.lie import quat_from_rotation
 
         m = np.asarray(matrices, float)
         self.set(path, "position", "vector3", m[:, :3, 3], times)

@@ -1,0 +1,1 @@
+"""Benchmarks and the batch runner, outside the library's core."""

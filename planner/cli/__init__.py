@@ -1,0 +1,1 @@
+"""The command line, ``stratawalk`` (:func:`planner.cli.main.main`)."""

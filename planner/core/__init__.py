@@ -1,0 +1,4 @@
+"""Foundations, importing nothing of the planner.
+
+Errors, interrupts, output files, the machine, Lie groups, leg names.
+"""

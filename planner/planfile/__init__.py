@@ -1,0 +1,1 @@
+"""The plan file (stratawalk.plan/1): the Plan, its independent check, its export."""
