@@ -25,6 +25,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from planner.body import paden_kahan as pk
+from planner.core.units import GRAVITY_M_S2
 
 if TYPE_CHECKING:
     from planner.body.robot_model import Leg, Robot
@@ -273,7 +274,7 @@ class LegKinematics:
             cols.append(jac[:, j] + ca.cross(ca.mtimes(base_rotation_W, axis_B), offset_W))
         return ca.horzcat(*cols)
 
-    def gravity_torque_ca(self, leg: int, base_rotation_W, theta, g_m_s2: float = 9.81):
+    def gravity_torque_ca(self, leg: int, base_rotation_W, theta, g_m_s2: float = GRAVITY_M_S2):
         """Symbolic (3,) generalized gravity of a leg's joints [N m]: d V / d theta.
 
         V = g sum_l m_l z_l over the leg's links (their world heights, base fixed): the leg's

@@ -48,6 +48,7 @@ import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
 from planner.core.errors import InputError, PlannerError
+from planner.core.units import GRAVITY_M_S2
 
 __all__ = [
     "GRAVITY_W",
@@ -68,7 +69,7 @@ __all__ = [
     "polygon_signed_distance",
 ]
 
-GRAVITY_W: tuple[float, float, float] = (0.0, 0.0, -9.81)
+GRAVITY_W: tuple[float, float, float] = (0.0, 0.0, -GRAVITY_M_S2)
 """Default gravity vector in the world frame [m/s^2]."""
 
 COND_MAX: float = 1e8

@@ -54,6 +54,7 @@ from planner.body.kinematics import kinematics_of, robot_cached
 from planner.body.margins import SWAY_STIFFNESS_AIM_MG_PER_L, SWAY_STIFFNESS_MIN_MG_PER_L
 from planner.body.servo_model import servo_model
 from planner.core.lie import hat_ca, rotation_from_vector_ca
+from planner.core.units import GRAVITY_M_S2
 
 if TYPE_CHECKING:
     from planner.body.robot import Robot
@@ -109,7 +110,7 @@ class SwayStiffness:
 
     def bound_n_per_m(self, mg_per_l: float) -> float:
         """A stiffness given in units of m g / L, in N/m for this robot."""
-        return float(mg_per_l) * self.robot.total_mass_kg * 9.81 / self.length_m
+        return float(mg_per_l) * self.robot.total_mass_kg * GRAVITY_M_S2 / self.length_m
 
     def _function(self, support: tuple[int, ...]) -> ca.Function:
         fun = self._functions.get(support)
@@ -139,7 +140,7 @@ class SwayStiffness:
             joints.append(th)
             jac_parts.append(ca.jacobian(th, xi))
         com = p + ca.mtimes(R, kin.com_B_ca(ca.vertcat(*joints)))
-        energy = energy + r.total_mass_kg * 9.81 * com[2]
+        energy = energy + r.total_mass_kg * GRAVITY_M_S2 * com[2]
         hess, grad = ca.hessian(energy, xi)
         joint_part = kp * sum(ca.mtimes(G.T, G) for G in jac_parts)
         fun = ca.Function(

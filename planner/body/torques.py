@@ -35,6 +35,7 @@ from numpy.typing import NDArray
 
 from planner.body.margins import COMMANDED_TORQUE_FRACTION
 from planner.body.statics import _csc, _tangent_bases, _zero_csc
+from planner.core.units import GRAVITY_M_S2
 
 if TYPE_CHECKING:
     from planner.body.robot import Robot
@@ -371,7 +372,7 @@ def least_squares_ratios_ca(
     distribution wherever that lies inside the cones (tested). Returns the (3 k,) ratios
     and the k forces [N] (CasADi), in the order of ``support``.
     """
-    b = ca.vertcat(0, 0, mass_kg * 9.81, 0, 0, 0)
+    b = ca.vertcat(0, 0, mass_kg * GRAVITY_M_S2, 0, 0, 0)
     legs = []  # per support leg: B_i^-1, (B_i^T B_i)^-1, A_i, c_i
     for i in (int(i) for i in support):
         th = joints12[3 * i : 3 * i + 3]

@@ -98,6 +98,7 @@ from planner.body.rolling import sliding
 from planner.body.stability import support_margin_m
 from planner.body.torques import TorqueCheck
 from planner.core.errors import PlannerError
+from planner.core.units import GRAVITY_M_S2
 from planner.motion.interpolate import BETWEEN_SAMPLES_RAD, BETWEEN_STEP_RAD, between_q
 from planner.planfile.plan import Plan
 
@@ -116,7 +117,6 @@ __all__ = [
 ]
 
 _Array = NDArray[np.float64]
-GRAVITY_MPS2 = 9.81
 _LEG_EXACT_M = 0.004  # leg clearances are exact below this [m]; above, a lower bound
 
 
@@ -552,7 +552,7 @@ class _Checker:
                 self.keyframe_forces(where, kf, com)
 
     def keyframe_forces(self, where: str, kf, com: _Array) -> None:
-        weight = self.mass * GRAVITY_MPS2
+        weight = self.mass * GRAVITY_M_S2
         limit = self.tol.force_balance_rel * weight
         f = kf.forces
         sup = [i - 1 for i in kf.support]
@@ -567,7 +567,7 @@ class _Checker:
                     f"{_leg(i)} carries {np.linalg.norm(f[i]):.3g} N but is not in support "
                     f"{kf.support}",
                 )
-        g = np.array([0.0, 0.0, -GRAVITY_MPS2])
+        g = np.array([0.0, 0.0, -GRAVITY_M_S2])
         o = kf.feet[sup].mean(axis=0) if sup else com
         res_f = np.linalg.norm(f.sum(axis=0) + self.mass * g)
         res_m = np.linalg.norm(

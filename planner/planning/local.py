@@ -38,6 +38,7 @@ from planner.body.stiffness import sway_stiffness_of
 from planner.body.torques import COMMANDED_TORQUE_FRACTION, TorqueCheck
 from planner.core import interrupts
 from planner.core.lie import rotation_from_quat
+from planner.core.units import GRAVITY_M_S2
 from planner.motion.footholds import best_and_shortest, foothold_candidates
 from planner.motion.gait_queue import CRAWL
 from planner.motion.heuristics import (
@@ -996,7 +997,7 @@ class LocalPlanner:
         """
         from planner.body.statics import static_feasibility
 
-        mg = self.robot.total_mass_kg * 9.81
+        mg = self.robot.total_mass_kg * GRAVITY_M_S2
         need = self.settings.balance_margin_frac * mg
         miss = 0.0  # a start out of reach (a measured state, 8.3): no farther out after it
         for k, s in enumerate(path):
@@ -1778,7 +1779,7 @@ class LocalPlanner:
         from planner.motion.time_law import CARRIED_SHARE
 
         m = self.robot.total_mass_kg
-        need = self.settings.balance_margin_frac * m * 9.81
+        need = self.settings.balance_margin_frac * m * GRAVITY_M_S2
         g_W = np.asarray(GRAVITY_W, float)
         com = np.array([self.check.com_W(s) for s in path])
         d = np.diff(com, axis=0)
@@ -1811,7 +1812,7 @@ class LocalPlanner:
                 still = float(np.abs(tmap @ g_W).max())
                 torque_maps[j] = (tmap, still + CARRIED_SHARE * max(TORQUE_FRACTION - still, 0.0))
             tmap, allowed = torque_maps[j]
-            return (allowed - float(np.abs(tmap @ g).max())) * m * 9.81
+            return (allowed - float(np.abs(tmap @ g).max())) * m * GRAVITY_M_S2
 
         def margin(k: int, a: float) -> float:
             out = np.inf
@@ -1824,7 +1825,7 @@ class LocalPlanner:
                     height = max(float(com[j][2] - feet[:, 2].mean()), 1e-3)
                     tip0 = max(tip(j, g_W), 0.0)
                     floor = min(tip0, max(CARRIED_SHARE * tip0, PATH_BALANCE_MARGIN_M))
-                    tip_floors[j] = (floor, m * 9.81 / height)
+                    tip_floors[j] = (floor, m * GRAVITY_M_S2 / height)
                 g = g_W - a * u[k]
                 floor, per_m = tip_floors[j]
                 out = min(out, raw(j, g) - floors[j], (tip(j, g) - floor) * per_m, torque(j, g))

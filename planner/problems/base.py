@@ -36,6 +36,7 @@ from planner.body import statics
 from planner.body.kinematics import kinematics_of
 from planner.body.state import State
 from planner.core.lie import coords_from_pose, pose_from_coords, rotation_from_vector_ca
+from planner.core.units import GRAVITY_M_S2
 from planner.problems.options import ThetaOptions
 
 FEASIBILITY_TOL = 1e-6  # [m, rad, N]: an independent violation above this is infeasible
@@ -184,7 +185,7 @@ class ConstraintCheck:
         if eq.degenerate:
             return float("inf"), eq.forces
         normals = self.terrain.normal(state.feet_W)
-        fmin = self.options.min_normal_force_frac * self.robot.total_mass_kg * 9.81
+        fmin = self.options.min_normal_force_frac * self.robot.total_mass_kg * GRAVITY_M_S2
         worst = 0.0
         for i in support:
             fn = float(eq.forces[i] @ normals[i])
@@ -524,7 +525,7 @@ class ThetaProblem:
 
     def _diagnose(self, status: str, violations: dict[str, float]) -> str:
         """Name the violated groups, most severe first (each relative to its unit scale)."""
-        mg = self.robot.total_mass_kg * 9.81
+        mg = self.robot.total_mass_kg * GRAVITY_M_S2
         scale = {
             "forces": 0.01 * mg,
             "joint_limits": 0.01,

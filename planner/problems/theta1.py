@@ -26,6 +26,7 @@ import numpy as np
 from planner.body import statics
 from planner.body.stability import support_margin_m
 from planner.body.state import State
+from planner.core.units import GRAVITY_M_S2
 from planner.problems.base import ThetaSolution
 from planner.problems.theta2 import Theta2
 
@@ -49,7 +50,7 @@ class Theta1(Theta2):
         if eq.degenerate:
             return False, f"degenerate support: {eq.message}"
         normals = self.terrain.normal(start.feet_W)
-        fmin = self.options.min_normal_force_frac * self.robot.total_mass_kg * 9.81
+        fmin = self.options.min_normal_force_frac * self.robot.total_mass_kg * GRAVITY_M_S2
         for i in self.support:
             fn = float(eq.forces[i] @ normals[i])
             ft = float(np.linalg.norm(eq.forces[i] - fn * normals[i]))

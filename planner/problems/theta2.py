@@ -46,6 +46,7 @@ from planner.body.state import S0, State
 from planner.body.stiffness import joint_sway_matrix_ca, sway_stiffness_of
 from planner.body.torques import TorqueCheck, joint_efforts_nm, least_squares_ratios_ca
 from planner.core.lie import coords_from_pose
+from planner.core.units import GRAVITY_M_S2
 from planner.motion.heuristics import frame_from_directions
 from planner.problems.base import (
     FEASIBILITY_TOL,
@@ -180,7 +181,7 @@ class Theta2(ThetaProblem):
             normal_cols = ca.reshape(normals, 3, 4)
             F = self._eq5_forces_ca(feet_cols, com)
             ns = [normal_cols[:, i] for i in range(4)]
-            fmin = o.min_normal_force_frac * r.total_mass_kg * 9.81
+            fmin = o.min_normal_force_frac * r.total_mass_kg * GRAVITY_M_S2
             cone = statics.friction_cone_residuals_ca(
                 F, self.mu, self.support, ns, eps_N=o.friction_eps_N
             )

@@ -15,6 +15,7 @@ import numpy as np
 from planner.body import statics
 from planner.body.state import S0, State
 from planner.core.lie import rotation_from_vector, vector_from_rotation
+from planner.core.units import GRAVITY_M_S2
 from planner.problems.base import (
     ThetaOptions,
     ThetaProblem,
@@ -66,7 +67,7 @@ class Theta4(ThetaProblem):
             cone = statics.friction_cone_residuals_ca(
                 F, self.mu, (0, 1, 2, 3), normals, eps_N=o.friction_eps_N
             )
-            fmin = o.min_normal_force_frac * r.total_mass_kg * 9.81
+            fmin = o.min_normal_force_frac * r.total_mass_kg * GRAVITY_M_S2
             self.constrain("forces_normal", cone[0::2], fmin, np.inf)
             self.constrain("forces_cone", cone[1::2], 0.0, np.inf)
         self.maximise_log("sigma1", o.weights[0], s1)

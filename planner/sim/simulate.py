@@ -50,6 +50,7 @@ from numpy.typing import NDArray
 from planner.body.torques import TorqueCheck, holding_load
 from planner.core import interrupts
 from planner.core.errors import InputError
+from planner.core.units import GRAVITY_M_S2
 from planner.planfile.plan import Keyframe, Plan, Samples, TerrainGrid, loaded_feet
 
 if TYPE_CHECKING:
@@ -77,7 +78,6 @@ __all__ = [
 ]
 
 MUJOCO_VERSION = "4.0.0"  # what the tests were run with (pyproject.toml pins it)
-GRAVITY = 9.81
 _ROBOT_GROUP = 1  # contype of robot geoms; terrain geoms have conaffinity 1 and contype 0
 _Array = NDArray[np.float64]
 
@@ -732,7 +732,7 @@ class Monitor:
         self.torque_ff: list[_Array] = []
         self._anchor: list[_Array | None] = [None] * 4
         self._sliding = np.zeros((4, 3))  # integral of the contact point's tangential velocity
-        weight = sim.robot.total_mass_kg * GRAVITY
+        weight = sim.robot.total_mass_kg * GRAVITY_M_S2
         self._min_load = self.settings.sliding_min_load_frac * weight
         self._sq, self._n, self._sat = 0.0, 0, 0
         self.rec_t: list[float] = []
