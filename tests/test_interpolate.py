@@ -17,7 +17,6 @@ from planner.motion.heuristics import nominal_height_m
 from planner.motion.interpolate import (
     interpolate_leaf,
     interpolate_swing,
-    swing_foot_path,
     swing_path,
 )
 
@@ -246,7 +245,6 @@ def test_swing_path_clears_a_step(source):
     pts = sp.points_W
     np.testing.assert_array_equal(pts[0], lift)
     np.testing.assert_array_equal(pts[-1], touch)
-    np.testing.assert_array_equal(swing_foot_path(terrain, lift, touch, clearance, 41, rho), pts)
     sharp = terrain.height_sharp(pts[:, 0], pts[:, 1])
     assert np.all(pts[:, 2] >= sharp - 1e-9)  # never below the surface (smooth ends: 1e-9)
     mid = sp.phase == 2

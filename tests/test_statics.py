@@ -1,4 +1,4 @@
-"""Tests of planner.body.statics: eq. 3-5 forces, section 7.3 (d), (e), sigma5, exact SOCP."""
+"""Tests of planner.body.statics: eq. 3-5 forces, section 7.3 (d), (e), exact SOCP."""
 
 from __future__ import annotations
 
@@ -19,8 +19,6 @@ from planner.body.statics import (
     friction_cone_residuals,
     friction_cone_residuals_ca,
     polygon_signed_distance,
-    sigma5,
-    sigma5_ca,
     static_feasibility,
     support_indices,
 )
@@ -140,10 +138,10 @@ def test_casadi_jacobians_match_finite_differences() -> None:
     np.testing.assert_allclose(j_feet, np.column_stack(cols), atol=1e-5)
 
 
-# ------------------------------------------------------------- section 7.3 (d), (e), sigma5
+# --------------------------------------------------------------------- section 7.3 (d), (e)
 
 
-def test_cone_residuals_numpy_casadi_and_sigma5() -> None:
+def test_cone_residuals_numpy_and_casadi() -> None:
     mu = 0.6
     rng = np.random.default_rng(11)
     forces = rng.normal(size=(4, 3)) + [0.0, 0.0, 3.0]
@@ -171,23 +169,13 @@ def test_cone_residuals_numpy_casadi_and_sigma5() -> None:
     fun = ca.Function("r", [ns], [friction_cone_residuals_ca(list(forces), mu, support, ns)])
     np.testing.assert_allclose(np.array(fun(normals.T)).reshape(-1, 2), smooth, atol=1e-12)
 
-    s5 = sigma5(forces, support, normals)
-    ref = min(forces[i] @ unit[i] / np.linalg.norm(forces[i]) for i in support)
-    assert s5 == pytest.approx(ref)
-    assert float(sigma5_ca(list(forces), support, normals, eps_N=0.0)) == pytest.approx(ref)
-    soft = float(sigma5_ca(list(forces), support, normals, smooth_k=50.0, eps_N=0.0))
-    assert ref - math.log(3) / 50.0 <= soft <= ref
-    ratios = [forces[i] @ unit[i] / np.linalg.norm(forces[i]) for i in support]
-    assert soft == pytest.approx(-math.log(sum(math.exp(-50.0 * r) for r in ratios)) / 50.0)
 
-
-def test_cone_boundary_and_sigma5_threshold() -> None:
+def test_cone_boundary() -> None:
     mu = 0.5
     on_cone = np.array([mu, 0.0, 1.0]) * 10.0  # |F_t| = mu F_n exactly
     forces = np.array([[0.0, 0.0, 10.0], [0.0, 0.0, 10.0], on_cone, [0.0, 0.0, 10.0]])
     assert forces_in_friction_cones(forces, mu, (0, 1, 3))
     assert not forces_in_friction_cones(forces, mu, (0, 1, 2))  # (e) strict, as in the paper
-    assert sigma5(forces, (0, 1, 2)) == pytest.approx(1.0 / math.sqrt(1.0 + mu**2))
     pulling = forces.copy()
     pulling[1] = [0.0, 0.0, -1.0]
     assert not forces_in_friction_cones(pulling, mu, (0, 1, 3))  # (d)
@@ -457,7 +445,7 @@ def test_bad_casadi_and_region_inputs() -> None:
     with pytest.raises(InputError, match="^com_W"):
         equilibrating_forces_ca(ca.SX.sym("f", 3, 4), ca.SX.sym("c", 2), MASS, (0, 1, 2))
     with pytest.raises(InputError, match="^forces_W"):
-        sigma5(np.ones((4, 2)), (0, 1, 2))
+        friction_cone_residuals(np.ones((4, 2)), 0.5, (0, 1, 2))
     with pytest.raises(InputError, match="^form"):
         friction_cone_residuals_ca(list(np.ones((4, 3))), 0.5, (0, 1, 2), form="cubic")
     with pytest.raises(InputError, match="^n_dirs"):

@@ -19,11 +19,8 @@ from planner.replay.terrain_plot import plot_top_view
 from planner.world.terrain import (
     NP,
     Terrain,
-    body_clearance,
-    body_clearance_ca,
     list_terrains,
     load_terrain,
-    min_body_clearance,
     terrains_dir,
 )
 
@@ -234,17 +231,6 @@ def test_smoothed_normal():
     tilt = np.degrees(np.arccos(step.normal(e)[2]))
     tilt_s = np.degrees(np.arccos(step.smoothed_normal(e, 0.05)[2]))
     assert tilt > 70.0 and tilt_s < 40.0
-    # CasADi version uses the same samples and weights
-    P = ca.SX.sym("p", 3)
-    f = ca.Function("n", [P], [step.smoothed_normal_ca(P, 0.05)])
-    np.testing.assert_allclose(np.array(f(e)).ravel(), step.smoothed_normal(e, 0.05), atol=1e-12)
-    rough = load_terrain("rough2cm")
-    r = np.array([1.2, 0.1, 0.0])
-    np.testing.assert_allclose(
-        np.array(ca.Function("n", [P], [rough.smoothed_normal_ca(P, 0.04)])(r)).ravel(),
-        rough.smoothed_normal(r, 0.04),
-        atol=1e-12,
-    )
 
 
 # ---------------------------------------------------------------------------------------
@@ -442,20 +428,6 @@ def test_env_var_overrides_terrains_dir(tmp_path, monkeypatch):
 
 # ---------------------------------------------------------------------------------------
 # body clearance (section 7.2 (b)), height grid, plot
-
-
-def test_body_clearance():
-    t = load_terrain("step5cm")
-    box = np.array([[x, y, z] for x in (0.6, 1.0) for y in (-0.1, 0.1) for z in (0.12, 0.2)])
-    c = body_clearance(t, box)
-    expected = box[:, 2] - np.where(box[:, 0] > 0.8, 0.05, 0.0)
-    np.testing.assert_allclose(c, expected, atol=1e-12)
-    assert min_body_clearance(t, box) == pytest.approx(0.07, abs=1e-12)
-    V = ca.SX.sym("V", 3, 8)
-    f = ca.Function("c", [V], [body_clearance_ca(t, V)])
-    out = np.array(f(box.T)).ravel()
-    assert out.shape == (8,)
-    np.testing.assert_allclose(out, c, atol=1e-12)
 
 
 def test_height_grid():

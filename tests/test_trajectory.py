@@ -133,12 +133,6 @@ def test_sine_series_endpoints_shape_and_length():
     np.testing.assert_allclose(tau2.end_W, bent.end_W, atol=1e-15)
 
 
-def test_point_at_distance_ahead():
-    tau = Trajectory.polyline([[0, 0, 0], [1, 0, 0], [1, 1, 0]])
-    np.testing.assert_allclose(tau.point_at_distance_ahead(0.8, 0.5), [1, 0.3, 0], atol=1e-15)
-    np.testing.assert_allclose(tau.point_at_distance_ahead(1.8, 0.5), [1, 1, 0], atol=1e-15)
-
-
 def test_straight_follows_the_ground_without_dipping():
     flat = Trajectory.straight([0, 0], [1.0, 0.5, 7.0], FLAT, H_M)
     assert flat.length_m == pytest.approx(np.hypot(1.0, 0.5), abs=1e-12)

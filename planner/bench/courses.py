@@ -54,7 +54,7 @@ COURSES = (
     "stepping_stones",
     "barrier75mm",
 )
-# issue 15's harder courses, at the limits of LittleDog's 18 cm legs
+# the harder courses, at the limits of LittleDog's 18 cm legs
 HARD_COURSES = (
     "trench12cm",
     "incline18",
@@ -65,9 +65,10 @@ HARD_COURSES = (
     "sparse_stones",
     "mix4m",
 )
-# issue 15's course where greedy soft stepping dead-ends and 8.5's backtracking reaches
+# a 6 cm step up to a goal on its top: a hind leg left below the riser is a dead end for
+# greedy stepping (8.2), which backtracking (8.5) gets out of
 BACKTRACK_COURSES = ("step6cm",)
-# issue 17's courses, walls and rocks the straight line runs into (planner "global")
+# walls and rocks the straight line runs into (planner "global", section 9)
 GLOBAL_COURSES = ("barrier15cm_opening", "maze_two_walls", "tall_rocks")
 # longer than 2 m; step6cm's on the step's top, 35 cm past its edge
 COURSE_GOALS = {"mix4m": (4.2, 0.0), "maze_two_walls": (2.6, 0.0), "step6cm": (1.1, 0.0)}
@@ -75,7 +76,8 @@ PLANNERS = ("soft", "recursive")
 ROBOTS = ("littledog",)
 START_XY = (0.2, 0.0)
 GOAL_XY = (2.2, 0.0)
-# [s] per plan: since the rolling feet and per-sample torque checks planning is ~5x slower
+# [s] per plan: the rolling feet and per-sample torque checks make planning ~5x slower
+# than without them
 TIME_BUDGET_S = 240.0
 
 

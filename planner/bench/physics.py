@@ -70,7 +70,8 @@ __all__ = [
 MODES = ("open", "feedback", "correct")
 MODE_NAMES = {"open": "open loop", "feedback": "feedback (8.3)", "correct": "correct (8.4)"}
 GENERATED = 20
-# [s] per plan: since the rolling feet and per-sample torque checks planning is ~5x slower
+# [s] per plan: the rolling feet and per-sample torque checks make planning ~5x slower
+# than without them
 TIME_BUDGET_S = 240.0
 TIME_SCALE = 1.0
 WORKERS = 2
@@ -300,7 +301,7 @@ def physics_rows(jobs: Sequence[dict], records: dict[str, dict]) -> list[dict]:
             row = {k: v for k, v in row.items() if k != "traceback"}
             row.update({k: planning[k] for k in _PLAN_COLUMNS if k in planning})
             if mode == "feedback" and row.get("com_to_goal_cm") is not None:
-                # the COM at the goal (records before the fix counted the end of a partial plan)
+                # the COM at the goal (records of older versions counted the end of a partial plan)
                 row["reached"] = bool(row["com_to_goal_cm"] <= 5.0 and not row.get("fell"))
             row["success"] = bool(
                 row.get("status") == "ok"

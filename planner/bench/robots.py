@@ -1,4 +1,4 @@
-"""``stratawalk bench robots``: every robot of the list on courses scaled to its legs (issue 14).
+"""``stratawalk bench robots``: every robot of the list on courses scaled to its legs.
 
 For each robot (:func:`planner.body.robot.robot_names`) and each course kind, a course is built
 from the robot's mean leg reach L (hip centre to foot centre, stretched):

@@ -1,4 +1,4 @@
-"""Planning speed (issue 16): time per course and per metre, where it goes, how it grows.
+"""Planning speed: time per course and per metre, where it goes, how it grows.
 
 ``stratawalk bench speed`` plans each course ``repeats`` times, each in a new process as
 ``stratawalk plan`` would (soft persuasion, 8.2, the default settings), and reports the
@@ -40,7 +40,7 @@ __all__ = [
     "run_speed_bench",
 ]
 
-# (terrain, goal x [m]) from (0.2, 0): issue 16's courses, walks of 2 m
+# (terrain, goal x [m]) from (0.2, 0): level, rough, a step and stairs, walks of 2 m
 COURSES = ("rough2cm", "flat", "step5cm", "stairs")
 PRESETS = ("default", "fast")  # the settings compared side by side
 # a preset name ending so is planned without the overlap worker (planner.planning.prefetch):
@@ -248,8 +248,8 @@ def _measure(
 def cli_start_s(repeats: int = 5, args=("--help",)) -> list[float]:
     """Wall times [s] of ``stratawalk --help`` (``args``), each in a new interpreter.
 
-    What a user waits for before any work: Python, the command line's imports (issue 16:
-    no CasADi, Pinocchio, MuJoCo or SciPy for the parser).
+    What a user waits for before any work: Python and the command line's imports (the
+    parser imports no CasADi, Pinocchio, MuJoCo or SciPy).
     """
     import subprocess
     import sys

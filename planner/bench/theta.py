@@ -675,7 +675,7 @@ def run_theta_bench(
             row["speed_ratio"] = _speed_ratio(pool[solver + "/common"], pool["slsqp"])
             summary.append(row)
         row = {"theta": theta, "terrain": "all", "solver": "slsqp"} | _stats(pool["slsqp"])
-        row["speed_ratio"] = _speed_ratio(pool["ipopt/common"], pool["slsqp"])  # as before
+        row["speed_ratio"] = _speed_ratio(pool["ipopt/common"], pool["slsqp"])  # as per terrain
         summary.append(row)
     result = {
         "format": "stratawalk.bench.theta/1",

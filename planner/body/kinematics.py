@@ -34,12 +34,6 @@ AXES_INTERSECT_TOL_M = 1e-9
 NOMINAL_DEPTH_FRACTION = 0.8  # theta_nor puts the foot at 80 % of the leg's vertical reach
 
 
-def _rot_np(axis: np.ndarray, angle: float) -> np.ndarray:
-    """Rodrigues' formula for a unit axis."""
-    w = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    return np.eye(3) + np.sin(angle) * w + (1 - np.cos(angle)) * (w @ w)
-
-
 def _rot_ca(axis: np.ndarray, angle):
     w = ca.DM([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
     return ca.DM.eye(3) + ca.sin(angle) * w + (1 - ca.cos(angle)) * ca.mtimes(w, w)

@@ -323,9 +323,8 @@ class LegLinks:
         """:meth:`path_margin` at every configuration of a path: one (N, C) array per scale.
 
         ``qs`` (N,) Pinocchio configurations, ``swing_legs`` (N,) the legs in the air at
-        each: one terrain query for the whole path (issue 16: a path's samples one by one
-        made 15 000 small terrain calls a rough2cm plan), each witness searched once for
-        all scales.
+        each: one terrain query for the whole path (a query per sample costs thousands of
+        small terrain calls a plan), each witness searched once for all scales.
         """
         n, n_caps, n_pts = len(qs), len(self.capsules), len(self._pts_J)
         point_legs, starts, (a_J, b_J) = self._point_legs, self._cap_starts, self._ends_J

@@ -13,15 +13,14 @@ SWAY_STIFFNESS_MIN_MG_PER_L = 0.8  # least sway stiffness of a three-leg stance 
 SWAY_STIFFNESS_AIM_MG_PER_L = 1.2  # ... and what Theta2 aims for where it can [m g / L]
 # joint torque / URDF effort the servos may need to hold a planned stance, in the force
 # distribution the feed-forward commands (least sum of (torque / effort)^2): the least
-# achievable ratio relies on internal foot forces no servo produces (barrier75mm: 49 %
-# achievable, 102 % commanded, and the HL knee saturated and the body yawed 6 degrees).
-# Chosen from MuJoCo: a servo at this fraction saturates after (1 - f) effort / kp of
-# error (LittleDog's knee, 0.6 N m at 20 N m/rad: 0.34 degrees at 0.8, 0.52 at 0.7), and
-# on three legs the servos' loads exceed the feed-forward by up to 0.3-0.4 of the effort
-# in healthy runs (internal forces of the stance: feet a millimetre off their set-points).
-# With 0.8 barrier9cm's plan fell open loop and stalled with feedback (a front knee
-# saturated, the body sagged 2.4 cm towards it within one swing, the diagonal hind foot
-# landed 13 mm above the ground); with 0.7 both barriers' new plans reach both ways
+# achievable ratio relies on internal foot forces no servo produces (a stance at 49 %
+# achievable needed 102 % commanded: the knee saturated and the body yawed).
+# Chosen from MuJoCo runs (bench/notes/2026-11-27-torque-fraction.md): a servo at this
+# fraction saturates after (1 - f) effort / kp of error (LittleDog's knee, 0.6 N m at
+# 20 N m/rad: 0.34 degrees at 0.8, 0.52 at 0.7), and on three legs the servos' loads
+# exceed the feed-forward by up to 0.3-0.4 of the effort in healthy runs (internal forces
+# of the stance: feet a millimetre off their set-points); at 0.8 a front knee saturated
+# and the body sagged towards it within one swing
 COMMANDED_TORQUE_FRACTION = 0.7
 
 __all__ = [

@@ -1,4 +1,4 @@
-"""How the planner's LittleDog-tuned lengths and times scale to another robot (issue 14).
+"""How the planner's LittleDog-tuned lengths and times scale to another robot.
 
 The planner's tunables were chosen on LittleDog, whose legs reach L0 = 0.1795 m (hip centre
 to foot centre, stretched). A robot whose mean leg reach is L gets the length scale

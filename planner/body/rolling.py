@@ -7,12 +7,13 @@ touching the ground stays still, so the sphere centre moves by
 
     delta_c = rho w x n                                   (n: terrain normal at the contact)
 
-and the contact point moves with it along the surface. Measured in MuJoCo before this
-model (section 10, the executor's sliding metric): a stance foot's centre travelled 2-4 mm
-per body move while its contact point slid < 0.5 mm, and open-loop walks ended 6 cm per
-metre from their planned end (the plan's joints were solved for fixed centres that the
-real feet did not keep). Holding the contact point still instead (rolling friction, a
-torsional stop) is not what a rubber ball on a shank does, so the planner models rolling.
+and the contact point moves with it along the surface. Measured in MuJoCo on plans with
+fixed contact points (section 10, the executor's sliding metric): a stance foot's centre
+travelled 2-4 mm per body move while its contact point slid < 0.5 mm, and open-loop walks
+ended 6 cm per metre from their planned end (the plan's joints were solved for fixed
+centres that the real feet did not keep). Holding the contact point still instead
+(rolling friction, a torsional stop) is not what a rubber ball on a shank does, so the
+planner models rolling.
 
 *Sliding* is what no-slip forbids, and one definition serves the planner, the validator
 and the simulator: the tangential part of the centre's travel minus the rolling,

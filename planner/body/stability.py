@@ -12,7 +12,7 @@ kept at least 21 mm fell. Executed feet land 5-10 mm from their planned points, 
 tilts 1-4 degrees on compliant servos (0.5-1 cm of COM at LittleDog's 15 cm height), and
 the leg that lifts unloads before its planned lift-off. Keyframes ask 25 mm, path
 samples (the swing leg's own mass moves the COM) 20 mm. Both are lengths of LittleDog's
-size; a larger robot's errors scale with its COM height (issue 14).
+size; a larger robot's errors scale with its COM height.
 """
 
 from __future__ import annotations

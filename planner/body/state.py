@@ -15,7 +15,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from planner.core.lie import coords_from_pose, pose_from_coords, quat_from_rotation
+from planner.core.lie import coords_from_pose, quat_from_rotation
 
 S0 = 0  # all four feet on the terrain
 
@@ -93,11 +93,6 @@ class State:
     def base_quaternion_xyzw(self) -> np.ndarray:
         """Base orientation as a unit quaternion (x, y, z, w)."""
         return quat_from_rotation(self.base_rotation_W)
-
-    def with_coords(self, eps: np.ndarray) -> State:
-        """Copy with the base pose set from compact exponential coordinates."""
-        g = pose_from_coords(np.asarray(eps, dtype=float))
-        return replace(self, base_position_W=g[:3, 3].copy(), base_rotation_W=g[:3, :3].copy())
 
     def copy(self) -> State:
         """Deep copy."""

@@ -6,8 +6,9 @@ Two answers to "can this stance stand?":
    *equilibrating* forces with zero *interaction* components, ``F_i = u x r_i + w``
    (eq. 3), where ``(u, w)`` solve the 6x6 force and moment balance (eqs. 4-5).  The
    stance is then accepted if these forces satisfy the inequalities (d) ``F_i.n_i > 0``
-   and (e) ``|F_i - (F_i.n_i) n_i| < mu F_i.n_i`` of section 7.3; ``sigma5`` scores how
-   far inside the cones they are.  Provided in numpy (:func:`equilibrating_forces`) and
+   and (e) ``|F_i - (F_i.n_i) n_i| < mu F_i.n_i`` of section 7.3 (how far inside the
+   cones they are, the paper's sigma5, is an objective term of the Theta problems,
+   :mod:`planner.problems.base`).  Provided in numpy (:func:`equilibrating_forces`) and
    CasADi (:func:`equilibrating_forces_ca`, exact derivatives for IPOPT).
 
 2. **The exact test** (beyond the paper; eq. 5 is only one of infinitely many force
@@ -62,8 +63,6 @@ __all__ = [
     "friction_cone_residuals",
     "forces_in_friction_cones",
     "friction_cone_residuals_ca",
-    "sigma5",
-    "sigma5_ca",
     "static_feasibility",
     "feasible_com_region",
     "polygon_signed_distance",
@@ -479,7 +478,7 @@ def equilibrating_forces_ca(
     return [forces_sup.get(i, zero) for i in range(N_LEGS)]
 
 
-# ----------------------------------------------------------- section 7.3 (d), (e), sigma5
+# ------------------------------------------------------------------- section 7.3 (d), (e)
 
 
 def _forces(forces_W: ArrayLike) -> _Array:
@@ -519,26 +518,6 @@ def forces_in_friction_cones(
 ) -> bool:
     """Whether inequalities (d) and (e) of section 7.3 hold: all residuals ``> tol_N``."""
     return bool(np.all(friction_cone_residuals(forces_W, mu, support, normals_W) > tol_N))
-
-
-def sigma5(
-    forces_W: ArrayLike,
-    support: Sequence[int] | Sequence[bool],
-    normals_W: ArrayLike | None = None,
-) -> float:
-    """Objective sigma5 of section 7.3: ``min_i (F_i.n_i) / |F_i|`` over the support.
-
-    The cosine of the largest angle between a support force and its normal (1 = all
-    along the normals); a zero force counts as 0.  Forces satisfy (e) iff
-    ``sigma5 > 1 / sqrt(1 + mu^2)`` (and (d)).
-    """
-    f = _forces(forces_W)
-    n = _normals(normals_W)
-    sup = list(support_indices(support))
-    fn = np.einsum("ij,ij->i", f[sup], n[sup])
-    norm = np.linalg.norm(f[sup], axis=1)
-    ratio = np.where(norm > 0.0, fn / np.where(norm > 0.0, norm, 1.0), 0.0)
-    return float(ratio.min())
 
 
 def _normals_ca(normals_W: object) -> list:
@@ -608,32 +587,6 @@ def friction_cone_residuals_ca(
         cone = mu * fn - ca.sqrt(ft2 + eps_N**2) if form == "smooth" else mu**2 * fn**2 - ft2
         out += [fn, cone]
     return ca.vertcat(*out)
-
-
-def sigma5_ca(
-    forces: Sequence,
-    support: Sequence[int] | Sequence[bool],
-    normals_W: object = None,
-    *,
-    smooth_k: float | None = None,
-    eps_N: float = 1e-3,
-) -> ca.SX | ca.MX:
-    """CasADi sigma5 of section 7.3: ``min_i F_i.n_i / sqrt(|F_i|^2 + eps_N^2)``.
-
-    ``smooth_k=None`` uses the exact (non-smooth) ``mmin``; ``smooth_k = k > 0`` the
-    soft-min ``-log(sum_i exp(-k x_i)) / k``, smooth and within ``log(n_support) / k``
-    below the true minimum.  ``eps_N`` [N] keeps the ratio smooth at ``F_i = 0``.
-    """
-    sup = support_indices(support)
-    forces = _vectors_ca(forces, "forces")
-    ns = _normals_ca(normals_W)
-    ratios = ca.vertcat(
-        *[ca.dot(forces[i], ns[i]) / ca.sqrt(ca.dot(forces[i], forces[i]) + eps_N**2) for i in sup]
-    )
-    if smooth_k is None:
-        return ca.mmin(ratios)
-    k = _positive(smooth_k, "smooth_k", "soft-min sharpness")
-    return -ca.log(ca.sum1(ca.exp(-k * ratios))) / k
 
 
 # --------------------------------------------------------------------- exact SOCP test

@@ -18,17 +18,15 @@ stiffness [N/m]. If H has an eigenvalue near or
 below zero, the body drifts along that direction when anything disturbs it: the load
 moves toward a foot, that leg sags under it, which moves more load there.
 
-Measured in MuJoCo (open loop, LittleDog): the two named and hard courses that fell at
-d26f735 (stairs_down at 73.7 s, barrier75mm at 52.8 s) fell from the three-leg stances
-with the least stiffness of their plans, 83 and 44-49 N/m (flat walking: 450-550). The
-same plans with stiffer servos (the soft stances then stiffer): barrier75mm still fell
-at kp 25 and 30 N m/rad (82-125 N/m) and walked at 40 (192-201 N/m); stairs_down walked
-at kp 25 (128 N/m). In the other 13 plans that ran in MuJoCo (named and hard, none fell)
-every three-leg stance had 186 N/m or more. Hence two levels: a three-leg stance needs
+Chosen from MuJoCo runs (open loop, LittleDog; bench/notes/2026-11-25-physics-named.md):
+plans that fell did so from the three-leg stances with the least stiffness of their
+plans, 44-83 N/m (flat walking: 450-550); the same plans on stiffer servos fell up to
+125 N/m and walked from 128 N/m; in the plans that did not fall every three-leg stance had
+186 N/m or more. Hence two levels: a three-leg stance needs
 :data:`SWAY_STIFFNESS_MIN_MG_PER_L`, 0.8 m g / L (131 N/m for LittleDog, above every
 stance that fell), and Theta2 aims for :data:`SWAY_STIFFNESS_AIM_MG_PER_L`, 1.2 m g / L
 (197 N/m, 1.6 times the stiffest that fell) where it finds such a pose. Asking 1.2 of
-every stance cost the hard courses barrier9cm (both planners) and step10cm (recursive).
+every stance loses courses at the limits of the legs.
 Between dynamically similar robots stiffness scales as m g / L (kp scales with m g L,
 :mod:`planner.body.servo_model`). The boundary itself is MuJoCo's: a crawl stance held on
 its three legs stays put (within 8 mm for 1.5 s) at 1.25 times the servo stiffness where

@@ -56,11 +56,11 @@ _SOLVED = ("Solved", "AlmostSolved")
 # shares of the friction coefficient the commanded (feed-forward) distribution may use, the
 # smallest first whose forces load no joint beyond COMMANDED_TORQUE_FRACTION (else the whole
 # cone): the least-squares forces lean along the legs, so on an incline they sat on the
-# cone's edge (incline18's soft plan: 77 % of its samples had a stance foot at
-# |f_t| = mu f_n) and the servos' errors pushed feet over it: HR slid 15 mm down the incline
-# with feedback and the walk stalled 136 cm short. Commanded within 0.7 mu, the same plan
-# slid 2.8 mm and reached (open loop 5.2 -> 2.7 mm); 0.7 alone loads the hind knees beyond
-# the fraction in a third of its samples, where 0.8 does not
+# cone's edge (most samples of an 18 degree incline's plan had a stance foot at
+# |f_t| = mu f_n) and the servos' errors pushed feet over it, down the incline. Chosen from
+# MuJoCo runs (bench/notes/2026-11-27-friction-reserve.md): within 0.7 mu the same plan's
+# feet slid a fifth as far and the walk reached; 0.7 alone loads the hind knees beyond the
+# fraction in a third of its samples, where 0.8 does not
 COMMANDED_FRICTION_SHARES = (0.7, 0.8, 0.9)
 CONE_SLACK = 1e-6  # least-squares forces this far (x the weight) inside every cone skip the SOCP
 _E_Z = np.array([0.0, 0.0, 1.0])
@@ -330,10 +330,10 @@ def holding_load(
     Per sample, the least-squares solution of :meth:`TorqueCheck.solve` on the ``contact``
     feet (balancing forces in the friction cones; normals from ``terrain`` at the foot
     centres, vertical without a terrain), effort-weighted so the weak knees carry least.
-    Measured in MuJoCo (the same plans, open loop): stepping_stones walked to its end and
-    barrier75mm ended 4.8 cm from its plan with this feed-forward; with the unweighted
-    one (what uniform servos settle into: a four-leg stand does, keeping 0.7 degrees of
-    sag) stepping_stones fell at 133 s and barrier75mm ended 9.6 cm off. A sample where
+    Measured in MuJoCo (the same plans, open loop): with this feed-forward the plans walked
+    to their ends; with the unweighted one (what uniform servos settle into: a four-leg
+    stand does, keeping 0.7 degrees of sag) a stepping-stones walk fell and a barrier walk
+    ended twice as far off its plan. A sample where
     no admissible forces balance the robot keeps the previous sample's values (zeros
     before the first): these are feed-forward for the servos, not a check.
     """

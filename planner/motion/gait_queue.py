@@ -35,10 +35,6 @@ class GaitQueue:
         """Put a leg at the back (it has stepped)."""
         self._q.append(int(leg))
 
-    def push_front(self, leg: int) -> None:
-        """Put a leg back at the front."""
-        self._q.appendleft(int(leg))
-
     def swap(self, leg: int, depth: int = 1) -> None:
         """Reinsert a leg that failed ``depth`` places back: the next legs go first.
 
@@ -48,10 +44,6 @@ class GaitQueue:
         """
         depth = max(1, min(int(depth), len(self._q)))
         self._q.insert(depth, int(leg))
-
-    def peek(self) -> int:
-        """The leg at the front, left in place."""
-        return self._q[0]
 
     def __len__(self) -> int:
         return len(self._q)

@@ -21,8 +21,8 @@ heights, with every length derived from the robot:
   a pit are blocked (no path: the straight line is kept). A drop (trench rim,
   step edge, stone edge) is not blocked: it is on the level of one of its sides, and
   crossing it is the local planner's job. ``max_step`` = ``STEP_FRACTION`` of the
-  shortest leg reach: 8.1 cm for LittleDog, whose course table has barrier75mm and
-  8 cm steps walked and barrier9cm and step10cm stuck.
+  shortest leg reach: 8.1 cm for LittleDog, between the edges its course table walks and
+  those it stalls at (bench/notes/2026-11-25-courses-hard.md).
 - blocked cells grow by the robot's half-width (its feet at theta_nor, plus the foot
   radius and ``CLEARANCE_M``): the path is where the body's centre may go; the course's
   border grows the same way.

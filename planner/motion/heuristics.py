@@ -59,14 +59,14 @@ WALL_RADIUS_M = 0.04  # a foothold this close to a higher edge (a riser, a pit w
 WALL_HEIGHT_M = 0.01  # ... when the top of that edge is this much higher [m]
 HAZARD_GRID_M = 0.003  # sampling step of the sharp terrain around a foothold [m]
 # a foothold with terrain PIT_DEPTH_M higher both within PIT_HALF_WIDTH_M ahead of it and
-# within that behind it lies in a trench or a pit: a hind foot put in a generated 7.5 cm
-# trench (8 cm deep) could not climb out once the body had moved on
+# within that behind it lies in a trench or a pit: a hind foot left on a trench's floor
+# cannot climb out once the body has moved on
 PIT_HALF_WIDTH_M = 0.07
 PIT_DEPTH_M = 0.03
 # a step that failed is tried again with the body target sunk until every hip is within
 # this share of its leg's reach of its foot, not below the body box's clearance (Theta2
 # holds 0.96; a crawl stance reaches 0.94 before a hind leg swings, so always sinking to 0.9
-# lowered every walk and made the hind legs roll the body 18 degrees over barrier75mm)
+# would lower every walk, and a low body rolls as its hind legs cross a barrier)
 TARGET_REACH_FRACTION = 0.9
 MAX_SUPPORT_TILT_RAD = np.radians(30.0)  # the body follows the footholds' plane up to this tilt
 BODY_TARGET_CLEARANCE_M = 0.02  # body target: box bottom this high over the terrain (as Theta2)
@@ -293,7 +293,7 @@ def support_body_target_W(
     heading_W: ArrayLike,
     terrain_normal_W: ArrayLike,
 ) -> tuple[float, _Array]:
-    """COM height over ``xy`` and body normal that follow the footholds (issue 15 item 2).
+    """COM height over ``xy`` and body normal that follow the footholds.
 
     Beyond the paper, whose body is d_c above the terrain under it and parallel to the
     terrain's smoothed normal (sections 7.2, 8.2.1): over a step the terrain under the
@@ -393,7 +393,7 @@ def reach_height_cap_m(
     sphere centre (a stance foot, or the swing leg's next foothold); ``legs``: the legs to
     keep within ``fraction`` of their reach. A hip too far sideways of its
     foot to reach it at any height is left out (sinking does not help it). Beyond the
-    paper (issue 15 item 2: the body lowers where a leg would be stretched).
+    paper: the body lowers where a leg would be stretched.
     """
     hips = np.asarray(hips_W, float).reshape(4, 3)
     centres = np.asarray(centres_W, float).reshape(4, 3)
@@ -523,8 +523,8 @@ def foothold_hazard(
     or at the bottom of a pit). With ``forward_W`` (the walking direction) only such walls
     ahead of the point or beside it count: one behind it is the edge the leg has just
     stepped down from, which the foot leaves behind and whose clearance from the leg's
-    links the planner checks exactly (the wall rule kept a front foot 4 cm from the riser
-    of an 8 cm step down, out of the leg's reach); but a point with terrain ``PIT_DEPTH_M``
+    links the planner checks exactly (counting it kept a foot stepping down off a step too
+    far from the riser, out of the leg's reach); but a point with terrain ``PIT_DEPTH_M``
     higher both ahead and behind it, within ``PIT_HALF_WIDTH_M``, is the floor of a trench
     or a pit, which the foot would have to climb out of. Smooth ground, however rough, has
     no edge.

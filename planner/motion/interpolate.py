@@ -44,7 +44,6 @@ if TYPE_CHECKING:
 __all__ = [
     "SwingPath",
     "swing_path",
-    "swing_foot_path",
     "default_clearance_m",
     "smootherstep",
     "interpolate_leaf",
@@ -57,7 +56,6 @@ DEFAULT_CLEARANCE_M = 0.03  # [m] swing clearance when no robot is given (Little
 CLEARANCE_FRACTION_OF_REACH = 0.167  # default clearance = 0.167 * leg reach (0.030 m, LittleDog)
 ON_TERRAIN_TOL_M = 1e-6  # a foot point within this of height(x, y) is on the terrain
 STANCE_TOL_M = 1e-9  # stance feet of the two ends of a leaf must agree to this
-PHASES = ("liftoff", "rise", "travel", "descend", "touchdown")
 BETWEEN_SAMPLES_RAD = 0.2  # a joint moving more in one sample interval has its leg links
 BETWEEN_STEP_RAD = 0.05  # checked this often between the samples (planner and check)
 
@@ -102,8 +100,8 @@ class SwingPath:
     points_W : (n, 3) stored foot points [m]: the contact points at both ends, the point one
         radius below the sphere centre in between.
     centres_W : (n, 3) sphere centres [m], continuous along the path.
-    phase : (n,) index into :data:`PHASES` (0 liftoff, 1 rise, 2 travel, 3 descend,
-        4 touchdown) of each sample.
+    phase : (n,) phase of each sample: 0 liftoff, 1 rise, 2 travel, 3 descend,
+        4 touchdown.
     travel_z_m : highest height of the stored point during the travel phase [m].
     corners_W : (6, 3) sphere-centre corners: lift centre, end of liftoff, top of rise, end
         of travel, start of touchdown, touch centre.
@@ -269,22 +267,6 @@ def swing_path(
     return SwingPath(s, points, centres, phase, float(travel_z), corners)
 
 
-def swing_foot_path(
-    terrain: _Terrain,
-    lift_W: ArrayLike,
-    touch_W: ArrayLike,
-    clearance_m: float = DEFAULT_CLEARANCE_M,
-    n: int = 21,
-    radius_m: float = 0.0,
-    liftoff_m: float | None = None,
-) -> _Array:
-    """Stored points (n, 3) [m] of :func:`swing_path`.
-
-    Contact points at the two ends, the point one radius below the sphere centre in between.
-    """
-    return swing_path(terrain, lift_W, touch_W, clearance_m, n, radius_m, liftoff_m).points_W
-
-
 # ---- interpolation along a leaf ---------------------------------------------------------------
 def _check_stance(state_a: State, state_b: State, stance: list[int]) -> None:
     from planner.body.robot import LEG_NAMES
@@ -312,10 +294,10 @@ def kept_knee_branches(kin, results, reference_rad, base_position_W, base_rotati
 
     A leg's result on the other branch than its ``reference_rad`` (``knee_flipped``: the
     target lies beyond the joint limits of its own branch) would be a jump of the path
-    through the leg's straight pose: a stance leg measured at its knee stop (8.3, a
-    barrier75mm hard plan's FR at 57.0 of 57.3 degrees, its contact put 1 mm higher on the
-    terrain the planner sees) got the other branch at the path's first sample, and the
-    servos, asked to turn the standing knee by 145 degrees, dropped the robot. Such a leg
+    through the leg's straight pose: a stance leg measured at its knee stop (8.3, its
+    contact a millimetre off the terrain the planner sees) gets the other branch at the
+    path's first sample, and the servos, asked to turn the standing knee by some 145
+    degrees, drop the robot. Such a leg
     keeps its reference joints and is out of reach by its miss [m] (``reachable`` False).
     ``None`` results (legs not solved at this sample) stay None.
     """

@@ -229,9 +229,8 @@ def _sample(free: _Free, lift: State, touch: State, way: _Array, n: int):
     ``n`` samples evenly spaced in time, and one at each interior vertex of ``way``: the
     executor moves the joints linearly between samples, so two samples on either side of
     a vertex would cut its corner, through configurations the segment checks never saw
-    (a front knee flipping 140 degrees between two samples out of a 12 cm trench swept
-    the foot through the trench's floor: the open-loop walk fell in MuJoCo). With the
-    vertices, every interval lies on one checked segment.
+    (a knee flipping between two such samples can sweep the foot through the ground).
+    With the vertices, every interval lies on one checked segment.
     """
     seg = np.linalg.norm(np.diff(way, axis=0), axis=1)
     cum = np.concatenate([[0.0], np.cumsum(seg)])

@@ -243,11 +243,6 @@ class Trajectory:
         return 0.0
 
     @property
-    def lambda_b(self) -> float:
-        """End of the parameter range, the length L [m]."""
-        return self.length_m
-
-    @property
     def start_W(self) -> _Array:
         """R_tau(lambda_a)."""
         return self.point(0.0)
@@ -264,10 +259,6 @@ class Trajectory:
     def clip(self, lam: ArrayLike) -> _Array:
         """Lambda clipped into [0, L]."""
         return np.clip(np.asarray(lam, dtype=float), 0.0, self.length_m)
-
-    def point_at_distance_ahead(self, lam: float, ds_m: float) -> _Array:
-        """R_tau(lambda + ds) [m], ``ds_m`` metres of arc length ahead, clipped to the end."""
-        return self.point(self.clip(float(lam) + float(ds_m)))
 
     def sample(self, spacing_m: float = 0.01) -> tuple[_Array, _Array]:
         """(lambdas (M,), points (M, 3)) every ``spacing_m`` or less, both ends included."""

@@ -1,4 +1,4 @@
-"""A plan as a fixed-rate trajectory for a robot controller: CSV or npz (issue 18).
+"""A plan as a fixed-rate trajectory for a robot controller: CSV or npz.
 
 Rows at t_i = i / rate from the plan's first to its last sample time (the last sample's
 time is always a row). Each row holds:

@@ -176,15 +176,15 @@ def _value(s: Setting, raw: Any, where: str) -> Any:
 # LittleDog's values; lengths (names ending in _m) scale with the robot's legs
 # (:func:`planner.body.robot_scale.length_scale`), accelerations do not (equal Froude numbers).
 PRESETS: dict[str, dict[str, Any]] = {
-    # issue 16, a walk nearly twice as fast on level ground that holds up in MuJoCo
+    # a walk nearly twice as fast on level ground that holds up in MuJoCo
     # (bench/results/speed.md), as careful as the defaults elsewhere: where the ground
     # under the feet (the swing's track) is level, two body moves per crawl cycle instead
     # of four, a stride of 2/3 of the leg's reach (1.9x the default), body moves at
     # 1.5 m/s^2 (the time law lowers it where friction or the zero-moment point ask) and a
-    # 2 cm swing height, and samples fine enough for the time law's intervals. The same
-    # everywhere planned 12 of the 17 named and hard courses, not 16, and stairs_down fell
-    # with feedback (bench/results/physics_fast_everywhere.md); with the samples
-    # everywhere, 9 (incline18 stalled).
+    # 2 cm swing height, and samples fine enough for the time law's intervals. Applied
+    # everywhere, these settings (and the samples alone) planned fewer of the named and
+    # hard courses than the defaults, and a plan fell with feedback
+    # (bench/notes/2026-11-26-physics-fast-everywhere.md): level ground only.
     "fast": {
         "com_target": "two_beat",
         "level_stride": 0.67,

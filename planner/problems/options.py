@@ -45,21 +45,20 @@ class ThetaOptions:
         solved again with the torque rows (:func:`planner.body.torques.least_squares_ratios_ca`).
         None: off. Without it Theta2 chose three-leg stances whose hind knee needed 93-140 %
         of its 0.6 N m on an 18 degree incline and an 8 cm step down, and the swing from
-        there failed. A margin below the paths' (0.75 against their 0.8) cost the 10 cm
-        climb (``tests/test_climb.py``): the recursive planner ran out of time; both at
-        0.7 it climbs.
+        there failed. It is the paths' fraction: a pose allowed less than its paths lost
+        the 10 cm climb of ``tests/test_climb.py`` (the recursive planner ran out of time).
     sway_stiffness : on three legs, Theta2's pose has at least this sway stiffness on the
         robot's servos, in units of m g / L (:mod:`planner.body.stiffness`; the feed-forward:
         the commanded torques); a pose below it is solved again with the stiffness as
-        rows. None: off. Without it the two named and hard courses that fell in MuJoCo
-        open loop fell from the plan's softest three-leg stances (44-83 N/m).
+        rows. None: off. Without it plans fell in MuJoCo open loop from their softest
+        three-leg stances (44-83 N/m).
     sway_stiffness_aim : ... and a feasible pose below this is solved again with rows that
         ask it, kept where they find one (None: not tried).
     max_tilt_rad : Theta2's body z axis at most this far from u_n (sigma2 >= its cosine);
         None: only ``sigma_floor``. The objective alone lets the body roll 17-29 degrees
         where the constraints press (edges, a stretched leg), but a 20 degree bound made
-        Theta2 pick other poses and the stepdown8cm plan ended 15.2 cm from its planned
-        end in MuJoCo open loop (2.6 cm without): off by default.
+        Theta2 pick other poses that walked worse in MuJoCo (an 8 cm step down ended 15 cm
+        from its planned end open loop, 3 cm without): off by default.
     whole_body_com : whole-body centre of mass (default) or the body link's (the paper).
     max_iter, tol : IPOPT's iteration cap and tolerance. If a problem fails with
         "Maximum_Iterations_Exceeded", raise max_iter or start nearer (warm start).
@@ -114,10 +113,10 @@ class LocalSettings:
     no_progress_cycles : cycles without the COM coming ``PROGRESS_M`` nearer the goal after
         which the planner is stuck (steps in place before an obstacle, some failing).
     follow_support : the body's height and tilt follow the plane of the footholds it will
-        stand on (issue 15 item 2); False: the paper's, over the terrain under the body.
+        stand on; False: the paper's, over the terrain under the body.
     com_target : where the body moves before a swing: "centroid", Lambda_c's (eq. 12, the
-        paper's, four body moves per crawl cycle) or "two_beat" (issue 16,
-        :func:`planner.motion.heuristics.two_beat_xy_W`: into both the swing's and the next
+        paper's, four body moves per crawl cycle) or "two_beat"
+        (:func:`planner.motion.heuristics.two_beat_xy_W`: into both the swing's and the next
         swing's support, two body moves per cycle) where the ground under the feet is level
         (:meth:`LocalPlanner.level_under`), Lambda_c's elsewhere.
     level_stride : the stride of Lambda_t where the ground a swing crosses is level
@@ -128,9 +127,8 @@ class LocalSettings:
         level, the swing height and samples where the ground under the swing's track is
         (None: ``body_accel_m_s2``, ``clearance_m``, ``body_samples``, ``swing_samples``). The
         fast preset walks fast on level ground and as carefully as the defaults elsewhere:
-        its 1.5 m/s^2 and 2 cm everywhere planned 12 of the 17 named and hard courses
-        (the defaults 16) and stairs_down fell with feedback; with those over level
-        ground only but 16 and 24 samples everywhere, 9 of 17 (incline18 stalled).
+        its settings applied everywhere planned fewer of the named and hard courses and a
+        plan fell with feedback (bench/notes/2026-11-26-physics-fast-everywhere.md).
     body_samples, swing_samples : samples of a body move's leaf and of a swing path. The
         time law is exact at the samples only (each interval at constant acceleration):
         long moves and swings run faster, and overlap more, with more of them.

@@ -14,7 +14,7 @@ Beyond the paper, ``height_band_m`` > 0 pins only the COM's horizontal position 
 (its height within the band, preferring r_c*'s by sigma4, the eq. 5 forces then checked in
 the problem as Theta2 does): tau is a path over the ground whose height the planner only
 guesses (:func:`planner.motion.heuristics.support_body_target_W`), and a COM pinned 7 mm too high
-left a leg out of reach on slope10. The default 0 is eq. 7 as written.
+can leave a leg out of reach on a slope. The default 0 is eq. 7 as written.
 """
 
 from __future__ import annotations

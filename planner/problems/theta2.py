@@ -462,9 +462,9 @@ class Theta2(ThetaProblem):
             if again.feasible or again.max_violation() < sol.max_violation():
                 sol = again
         if not sol.feasible and hint is not None:
-            # from the hint's body pose, the legs re-solved onto the start's feet: a
-            # measured state 1 cm off the plan's (barrier75mm's FR knee 0.08 rad from its
-            # limit) stalled at "Maximum_Iterations_Exceeded" 0.5 mm from the plan's pose
+            # from the hint's body pose, the legs re-solved onto the start's feet: from a
+            # measured state 1 cm off the plan's (a knee near its limit) IPOPT can stall at
+            # "Maximum_Iterations_Exceeded" 0.5 mm from the plan's pose
             near = hint.copy()
             near.feet_W = np.array(start.feet_W, float).copy()
             again = self.solve_packed(p, self.initial_guess(near, p))
@@ -482,8 +482,8 @@ class Theta2(ThetaProblem):
             # the torque rows cost 2-3x per solve and bind only where a stance is heavily
             # loaded (inclines, steps), the sway cuts only where it is soft: solved with
             # them, from this pose, only then. Also where the pose misses another constraint
-            # too: barrier9cm's recursive plan had 4 of its 17 such poses made feasible so,
-            # and without them ran out of its 600 s (31 steps; 293 s and reached with)
+            # too: the rows make some such poses feasible, and a barrier climb that lacked
+            # them ran out of time
             sol = self._solve_sibling(sol, p)
         aim = self.options.sway_stiffness_aim
         if sol.feasible and aim is not None and self.options.sway_stiffness is not None:
@@ -539,8 +539,7 @@ class Theta2(ThetaProblem):
     def hold(self, start: State, rc_star_W, u_f, u_n, swing_target_W=None) -> ThetaSolution:
         """Theta2's constraints at ``start`` itself: the body stays where it stands.
 
-        Beyond the paper (issue 16's two-beat crawl,
-        :func:`planner.motion.heuristics.two_beat_xy_W`):
+        Beyond the paper (the two-beat crawl, :func:`planner.motion.heuristics.two_beat_xy_W`):
         where the COM already stands inside the three legs' triangle with margin, the
         optimum lies millimetres away, and a move of millimetres is a rest-to-rest body
         move all the same (0.08 s at 1.5 m/s^2). The start's pose and joints are checked

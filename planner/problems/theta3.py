@@ -15,7 +15,7 @@ Beyond the paper: the touch-down joints are first sought ``LANDING_LIMIT_MARGIN_
 inside the URDF limits (:func:`~planner.problems.base.landing_bounds_rad`; a foot landed
 with a joint at its stop may not lift off again along the normal), and within the full
 limits only where no such landing exists (a stone reached sideways with the hip roll at
-its stop: with the margin alone soft stalled on generated stones, gen:1, that it walks
+its stop: with the margin alone soft stalled on generated stepping stones that it walks
 without it).
 """
 

@@ -28,12 +28,12 @@ A generated course is named ``gen:SEED`` (difficulty 1, length 3 m) or
 ``gen:SEED:DIFFICULTY[:LENGTH]``; :func:`write_course` writes it as YAML, which
 ``stratawalk plan --terrain`` and batch jobs accept as a path.
 
-Issue 15's kinds, ``incline`` (a ramp up or down, up to ``MAX_INCLINE_DEG``) and
+Two more kinds, ``incline`` (a ramp up or down, up to ``MAX_INCLINE_DEG``) and
 ``barrier`` (a wall to step over, up to ``MAX_BARRIER_M`` high), are drawn only when asked
 for (``kinds``, ``stratawalk generate-course --kinds``): the default deck stays the five
 above, so that ``gen:SEED`` names the same course as in the physics benchmarks.
 
-The feature ladder (issue 15): :func:`feature_course` makes a course with one feature of
+The feature ladder: :func:`feature_course` makes a course with one feature of
 a given size (``feat:KIND:SIZE``, e.g. ``feat:step:0.1``, ``feat:gap:0.12``,
 ``feat:incline:18``): flat to x = 0.6 m, the feature, flat after it, the goal 0.35-0.45 m
 past its last edge (:func:`course_goal_xy`). :data:`LADDER` lists the sizes of the limits
@@ -70,7 +70,7 @@ __all__ = [
 ]
 
 FEATURE_KINDS = ("rough", "step", "gap", "stairs", "stepping_stones")  # the default deck
-EXTRA_KINDS = ("incline", "barrier")  # issue 15's, drawn when asked for
+EXTRA_KINDS = ("incline", "barrier")  # drawn only when asked for
 FRICTION = 0.7
 X_MIN_M = -0.5
 Y_MIN_M, Y_MAX_M = -0.6, 0.6

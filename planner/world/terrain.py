@@ -98,11 +98,8 @@ __all__ = [
     "DEFAULT_SMOOTHING_M",
     "KINDS",
     "Terrain",
-    "body_clearance",
-    "body_clearance_ca",
     "list_terrains",
     "load_terrain",
-    "min_body_clearance",
     "terrains_dir",
 ]
 
@@ -1414,40 +1411,6 @@ class Terrain:
         """Pseudo-normal grad f_T / |grad f_T| for a CasADi 3-vector (section 4.5)."""
         g = self.gradient_ca(p_W)
         return g / ca.norm_2(g)
-
-    def smoothed_normal_ca(self, p_W: Any, radius: float) -> Any:
-        """CasADi version of :meth:`smoothed_normal` (same samples and weights)."""
-        if radius == 0.0:
-            return self.normal_ca(p_W)
-        m = 0.0
-        for (ox, oy), wt in zip(_PATTERN_OFFSETS, _PATTERN_WEIGHTS, strict=True):
-            q = ca.vertcat(p_W[0] + radius * ox, p_W[1] + radius * oy, p_W[2])
-            m = m + wt * self.normal_ca(q)
-        return m / ca.norm_2(m)
-
-
-# ----------------------------------------------------------------------------------------
-# Body clearance (section 7.2, constraint (b): min over P of f_T >= delta_c).
-
-
-def body_clearance(terrain: Terrain, points_W: Any) -> np.ndarray:
-    """f_T at each vertex of the body polyhedron P, points (N, 3) world -> (N,) metres."""
-    p = np.asarray(points_W, dtype=float).reshape(-1, 3)
-    return np.atleast_1d(np.asarray(terrain.f_T(p), dtype=float))
-
-
-def min_body_clearance(terrain: Terrain, points_W: Any) -> float:
-    """Minimum over the vertices of f_T (compare with delta_c)."""
-    return float(np.min(body_clearance(terrain, points_W)))
-
-
-def body_clearance_ca(terrain: Terrain, points_W: Any) -> Any:
-    """f_T at each column of a CasADi 3 x N matrix of vertices; an N x 1 column.
-
-    Impose each entry >= delta_c in the NLP (equivalent to the min constraint, but smooth).
-    """
-    n = points_W.shape[1]
-    return ca.vertcat(*[terrain.f_T_ca(points_W[:, i]) for i in range(n)])
 
 
 # ----------------------------------------------------------------------------------------
