@@ -4,14 +4,20 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-import planner.planning.local as base_module
 from planner.body.kinematics import kinematics_of
 from planner.body.robot import load_robot
 from planner.body.rolling import sliding
 from planner.motion.gait_queue import CRAWL, GaitQueue
+from planner.motion.heuristics import TARGET_REACH_FRACTION, nominal_height_m
 from planner.motion.trajectory import Trajectory
-from planner.planning.local import OTHER_FOOTHOLDS
+from planner.planning.landing import (
+    KNEE_CHOICE_FOOT_ZONE_M,
+    PASSAGE_CLEARANCE_M,
+    PASSAGE_RAISES_M,
+    PASSAGE_STRIDES,
+)
 from planner.planning.soft import SoftPlanner
+from planner.planning.targets import ALWAYS_REACH_FRACTION, OTHER_FOOTHOLDS
 from planner.world.terrain import load_terrain
 
 
@@ -456,10 +462,10 @@ def test_a_failed_step_is_tried_again_with_the_body_lower(flat_planner, monkeypa
     planner._sink = True
     low = planner.body_target(stretched, 1, tau=tau)
     assert low[2] < high[2] - 0.005 and np.allclose(low[:2], high[:2])
-    fraction = base_module.TARGET_REACH_FRACTION
+    fraction = TARGET_REACH_FRACTION
     assert planner._reach_sink_m(stretched, 1, low, tau, None, fraction) > -1e-9  # in reach
     # without backing off the target sinks too, less: within ALWAYS_REACH_FRACTION
-    always = base_module.ALWAYS_REACH_FRACTION
+    always = ALWAYS_REACH_FRACTION
     assert always > fraction
     assert planner._reach_sink_m(stretched, 1, high, tau, None, always) > -1e-9
     assert planner._reach_sink_m(stretched, 1, high, tau, None, fraction) < -0.005
@@ -627,7 +633,7 @@ def _exact_far_clearance_m(robot, state, leg, box_lo, box_hi):
             continue
         n = int(np.ceil(np.linalg.norm(b[c] - a[c]) / 5e-4)) + 1
         pts = a[c] + np.linspace(0.0, 1.0, n)[:, None] * (b[c] - a[c])
-        pts = pts[np.linalg.norm(pts - foot, axis=1) >= base_module.KNEE_CHOICE_FOOT_ZONE_M]
+        pts = pts[np.linalg.norm(pts - foot, axis=1) >= KNEE_CHOICE_FOOT_ZONE_M]
         if not len(pts):
             continue
         centre, half = 0.5 * (box_lo + box_hi), 0.5 * (box_hi - box_lo)
@@ -661,14 +667,14 @@ def test_a_hind_foot_that_stops_the_body_passing_a_barrier_is_refused(littledog)
     back = _standing(rec, base, feet[:3] + [(0.70, -0.069)], knees)
     assert not rec.blocks_passage(back, 3)
 
-    nominal = base_module.nominal_height_m(littledog)
+    nominal = nominal_height_m(littledog)
     for state, blocked in ((near, True), (back, False)):
         th = state.joints_rad[3]
         centre = kinematics_of(littledog).foot_B(3, th) + state.base_position_W
-        for strides in base_module.PASSAGE_STRIDES:
+        for strides in PASSAGE_STRIDES:
             x = state.base_position_W[0] + strides * rec.stride_m()
             exact = []
-            for dz in base_module.PASSAGE_RAISES_M:
+            for dz in PASSAGE_RAISES_M:
                 moved = state.copy()
                 moved.base_position_W = np.array([x, 0.0, nominal + dz])
                 ik = rec.kin.ik_leg(3, centre - moved.base_position_W, reference_rad=th, knee=1)
@@ -676,10 +682,10 @@ def test_a_hind_foot_that_stops_the_body_passing_a_barrier_is_refused(littledog)
                     continue
                 moved.joints_rad[3] = ik.joints_rad
                 exact.append(_exact_far_clearance_m(littledog, moved, 3, lo, hi))
-            if blocked and strides == base_module.PASSAGE_STRIDES[-1]:
-                assert exact and max(exact) < base_module.PASSAGE_CLEARANCE_M
+            if blocked and strides == PASSAGE_STRIDES[-1]:
+                assert exact and max(exact) < PASSAGE_CLEARANCE_M
             if not blocked:
-                assert exact and min(exact) >= base_module.PASSAGE_CLEARANCE_M
+                assert exact and min(exact) >= PASSAGE_CLEARANCE_M
         if blocked:  # and the rearward branch cannot stand there
             other = rec.kin.ik_leg(3, centre - state.base_position_W, reference_rad=th, knee=-1)
             assert not other.reachable or other.knee_flipped

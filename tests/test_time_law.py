@@ -291,7 +291,7 @@ def test_a_body_move_over_an_edge_goes_no_faster_than_its_clearance_allows(littl
     face); over flat ground the clearance is ample and the law is the plain one."""
     from planner.motion.time_law import BODY_LAG_S
     from planner.motion.trajectory import Trajectory
-    from planner.planning.local import BODY_CLEARANCE_M
+    from planner.planning.path_checks import BODY_CLEARANCE_M
     from planner.planning.soft import SoftPlanner
     from planner.world.terrain import Terrain, load_terrain
 

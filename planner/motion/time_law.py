@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -46,7 +47,13 @@ __all__ = [
     "rest_to_rest_profile",
     "carried_accel_m_s2",
     "near_terrain_caps",
+    "timed_settings",
+    "joint_speed_limits_rad_s",
+    "hip_arm_m",
     "BODY_LAG_S",
+    "BODY_SPEED_M_S",
+    "BODY_ACCEL_M_S2",
+    "SWING_TIME_S",
     "JOINT_SPEED_FRACTION",
     "OVER_EDGE_SPEED_FRACTION",
 ]
@@ -80,6 +87,13 @@ MIN_INTERVAL_S = 1e-4  # no interval is shorter (repeated samples) [s]
 # reached (0.8 cm), as did the whole plan at time scale 1.5
 BODY_LAG_S = 0.3
 LEAST_SPARE_M = 0.002  # a body already nearer than its margin still moves, slowly
+# the local planners' defaults (timed_settings), chosen from MuJoCo runs at time scale 1:
+BODY_SPEED_M_S = 0.25  # LittleDog's body moves, peak [m/s] (x sqrt(s) for another robot)
+# ... their acceleration bound [m/s^2], lower where the stance cannot carry it: the 10 cm
+# climb (tests/test_climb.py) slid and fell open loop at 1.0 and 1.5 (its body overshot a
+# fast move by 2 cm before a swing), and was executed as planned at 0.5
+BODY_ACCEL_M_S2 = 0.5
+SWING_TIME_S = 0.25  # LittleDog's least swing [s] (x sqrt(s))
 
 
 def rest_to_rest_durations_s(lengths: _Array, caps: _Array, accel) -> _Array:
@@ -257,6 +271,37 @@ def swing_caps(
     caps = np.full(len(ell), foot_speed_m_s)
     caps[len(ell) - max(1, round(len(ell) * LANDING_FRACTION)) :] = landing_speed_m_s
     return ell, np.minimum(caps, _joint_caps(joints_rad, ell, vmax_rad_s, fraction))
+
+
+def timed_settings(settings, robot):
+    """``settings`` (:class:`planner.problems.options.LocalSettings`) with unset timing set.
+
+    ``body_speed_m_s``, ``body_accel_m_s2`` and ``swing_time_s`` where None: LittleDog's
+    :data:`BODY_SPEED_M_S`, :data:`BODY_ACCEL_M_S2` and :data:`SWING_TIME_S`, speeds and
+    times scaled to ``robot`` by dynamic similarity (:mod:`planner.body.robot_scale`).
+    """
+    from planner.body.robot_scale import time_scale
+
+    k = time_scale(robot)
+    if settings.body_speed_m_s is None:
+        settings = replace(settings, body_speed_m_s=BODY_SPEED_M_S * k)
+    if settings.body_accel_m_s2 is None:
+        settings = replace(settings, body_accel_m_s2=BODY_ACCEL_M_S2)
+    if settings.swing_time_s is None:
+        settings = replace(settings, swing_time_s=SWING_TIME_S * k)
+    return settings
+
+
+def joint_speed_limits_rad_s(robot) -> _Array | None:
+    """The URDF's velocity limits of ``robot``'s 12 leg joints [rad/s] (None where none is set)."""
+    vmax = np.asarray(robot.model.velocityLimit, float)[-12:]
+    return vmax if len(vmax) == 12 else None
+
+
+def hip_arm_m(robot) -> float:
+    """Mean horizontal distance of ``robot``'s hips from the base [m] (a turn's lever)."""
+    hips = np.array([leg.points_B[0] for leg in robot.legs])
+    return float(np.mean(np.linalg.norm(hips[:, :2], axis=1)))
 
 
 def _angle(Ra: _Array, Rb: _Array) -> float:

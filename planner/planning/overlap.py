@@ -31,7 +31,7 @@ millimetres, :mod:`planner.motion.leg_swing`), and body moves through a via pose
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -43,17 +43,57 @@ from planner.body.state import State
 from planner.body.stiffness import sway_stiffness_of
 from planner.core.lie import interpolate_coords, pose_from_coords
 from planner.motion.interpolate import kept_knee_branches, swing_path
+from planner.planning.step import Step
 
 if TYPE_CHECKING:
-    from planner.planning.local import LocalPlanner, Step
+    from planner.body.kinematics import LegKinematics
+    from planner.body.robot_model import Robot
+    from planner.body.torques import TorqueCheck
+    from planner.problems.base import ConstraintCheck
+    from planner.problems.options import LocalSettings
+    from planner.world.terrain import Terrain
 
-__all__ = ["Overlap", "overlap_step", "SLIDING_BUDGET_M"]
+__all__ = ["Overlap", "OverlapPlanner", "overlap_step", "SLIDING_BUDGET_M"]
 
 _Array = NDArray[np.float64]
 _NU_TOL = 1e-9
 # the stance feet roll from the body path's samples (see _merged); between two swing samples
 # that leaves them sliding by the rolling's sampling error, at most this [m] (check: 1e-6)
 SLIDING_BUDGET_M = 5e-7
+
+
+class OverlapPlanner(Protocol):
+    """What :func:`overlap_step` uses of a local planner, and no more.
+
+    The robot, its terrain and friction, the leg kinematics, the settings
+    (``swing_overlap``, ``theta.sway_stiffness``), the COM (``check.com_W``), the joint
+    torques (``torques.solve``); the planner's path checks, the time law of its body paths
+    and swings, and its swing height. :class:`planner.planning.local.LocalPlanner` has them.
+    """
+
+    robot: Robot
+    terrain: Terrain
+    mu: float
+    kin: LegKinematics
+    settings: LocalSettings
+    check: ConstraintCheck
+    torques: TorqueCheck
+
+    def path_problem(self, path: list[State]) -> str:
+        """Why a sampled path is not executable, or "" (section 8's checks per sample)."""
+        ...
+
+    def body_offsets_s(self, path: list[State]) -> _Array:
+        """Times [s] of a body path's samples 1.. after its first."""
+        ...
+
+    def swing_offsets_s(self, path: list[State], leg: int) -> _Array:
+        """Times [s] of a swing's samples 1.. after its first."""
+        ...
+
+    def swing_clearance_m(self, state: State, leg: int, touch_W) -> float:
+        """The swing height [m] of ``leg`` from ``state`` to ``touch_W``."""
+        ...
 
 
 class Overlap:
@@ -90,7 +130,7 @@ def _lifted_copy(s: State, leg: int) -> State:
     return out
 
 
-def _earliest_lift(planner: LocalPlanner, body: list[State], leg: int) -> int:
+def _earliest_lift(planner: OverlapPlanner, body: list[State], leg: int) -> int:
     """The first body sample from which the COM stays inside three feet with margin.
 
     A cheap screen for :func:`overlap_step` (``BALANCE_MARGIN_M``, the swing leg at its
@@ -120,7 +160,7 @@ def _moving(path: list[State]) -> range:
     return range(len(path) - 1)
 
 
-def _tips(planner: LocalPlanner, path: list[State], leg: int) -> str:
+def _tips(planner: OverlapPlanner, path: list[State], leg: int) -> str:
     """Why a sample of ``path`` with the body moving lacks a chosen pose's tip margin, or "".
 
     While the body moves on three legs the COM keeps ``BALANCE_MARGIN_M`` (25 mm, Theta2's
@@ -137,7 +177,7 @@ def _tips(planner: LocalPlanner, path: list[State], leg: int) -> str:
 
 
 def _merged(
-    planner: LocalPlanner,
+    planner: OverlapPlanner,
     step: Step,
     lift: int,
     body_t: _Array,
@@ -217,7 +257,7 @@ def _merged(
     return out
 
 
-def _max_sliding_m(planner, path: list[State], leg: int) -> float:
+def _max_sliding_m(planner: OverlapPlanner, path: list[State], leg: int) -> float:
     """The stance feet's largest sliding [m] between two samples of ``path`` (``check``'s).
 
     As ``check`` measures it: the terrain normal at each sample's own contact points (of
@@ -243,7 +283,7 @@ def _centres_W(kin, s: State, legs: list[int]) -> _Array:
     return fb @ s.base_rotation_W.T + s.base_position_W
 
 
-def _swings_with_body(planner: LocalPlanner, path: list[State], leg: int) -> str:
+def _swings_with_body(planner: OverlapPlanner, path: list[State], leg: int) -> str:
     """Why a three-leg stance of ``path`` with the body still moving sways, or ""."""
     bound = planner.settings.theta.sway_stiffness
     if bound is None:
@@ -265,7 +305,7 @@ def _swings_with_body(planner: LocalPlanner, path: list[State], leg: int) -> str
     return ""
 
 
-def overlap_step(planner: LocalPlanner, step: Step) -> Overlap | None:
+def overlap_step(planner: OverlapPlanner, step: Step) -> Overlap | None:
     """``step``'s samples with its swing starting inside its body move, or None.
 
     None where no earlier lift-off passes the checks (or the step is not a placement, its
@@ -330,10 +370,15 @@ def _timed_merge(planner, step, lift, body_t, nus, swing_alone, clr):
     return path, np.concatenate([[0.0], np.cumsum(np.maximum(need, dt))])
 
 
-def _least_intervals_s(planner, path: list[State], leg: int) -> _Array:
+def _least_intervals_s(planner: OverlapPlanner, path: list[State], leg: int) -> _Array:
     """Least durations [s] of a path's intervals under the joint and swing-foot speed caps."""
     from planner.body.robot_scale import time_scale
-    from planner.motion.time_law import FOOT_SPEED_M_S, LANDING_SPEED_M_S, swing_caps
+    from planner.motion.time_law import (
+        FOOT_SPEED_M_S,
+        LANDING_SPEED_M_S,
+        joint_speed_limits_rad_s,
+        swing_caps,
+    )
 
     k = time_scale(planner.robot)
     ell, caps = swing_caps(
@@ -341,6 +386,6 @@ def _least_intervals_s(planner, path: list[State], leg: int) -> _Array:
         np.array([s.joints_rad.ravel() for s in path]),
         foot_speed_m_s=FOOT_SPEED_M_S * k,
         landing_speed_m_s=LANDING_SPEED_M_S * k,
-        vmax_rad_s=planner._joint_speed_limits(),
+        vmax_rad_s=joint_speed_limits_rad_s(planner.robot),
     )
     return ell / caps

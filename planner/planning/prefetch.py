@@ -6,7 +6,7 @@ sample) took about a third of a rough2cm plan's time, and nothing planned after 
 depends on it: the next step starts from the step's own end, which the overlap keeps. So
 :class:`OverlapWorker` hands each recorded step to a process forked from the planner (the
 same objects, no pickled planner) and collects the answers when the walk's samples are put
-together (:class:`planner.planning.local.Walk`), before the planning time is taken. The answers
+together (:class:`planner.planning.driver.Walk`), before the planning time is taken. The answers
 are the ones the planner would compute itself (the same code on the same inputs), so a
 plan is the same to the bit with or without the worker; where there is no ``fork`` (not
 Linux, or inside a daemonic process such as a Dask worker) or the worker dies, the
@@ -23,11 +23,12 @@ import warnings
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from planner.planning.local import LocalPlanner, Step
+    from planner.planning.overlap import OverlapPlanner
+    from planner.planning.step import Step
 
 __all__ = ["OverlapWorker"]
 
-_PLANNER: LocalPlanner | None = None  # the planner a forked worker serves
+_PLANNER: OverlapPlanner | None = None  # the planner a forked worker serves
 ENV_OFF = "STRATAWALK_OVERLAP_WORKER"  # "0": no worker in this process (nor its children)
 PARENT_LOOK_S = 1.0  # how often an idle worker looks whether the planner's process is alive
 
@@ -87,7 +88,7 @@ class OverlapWorker:
     path before lift-off, the landing) are the step's objects again.
     """
 
-    def __init__(self, planner: LocalPlanner):
+    def __init__(self, planner: OverlapPlanner):
         global _PLANNER
         ctx = mp.get_context("fork")
         self._conn, child = ctx.Pipe()
@@ -106,7 +107,7 @@ class OverlapWorker:
         self.used = 0
 
     @classmethod
-    def start(cls, planner: LocalPlanner) -> OverlapWorker | None:
+    def start(cls, planner: OverlapPlanner) -> OverlapWorker | None:
         """A worker for ``planner``, or None (no fork; ``ENV_OFF`` set to "0").
 
         ``ENV_OFF`` is for a caller that already runs a planning process per core.

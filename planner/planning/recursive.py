@@ -12,14 +12,15 @@ cannot be made, go back as far as needed and try the earlier steps differently. 
   ambition in turn; a feasible step recurses with n - 1 and the leg pushed to the back;
   when the recursion fails, the step is undone (the walk is rewound) and the next option
   tried: this is the tracing back of 8.5;
-- the walk is planned in windows of ``lookahead`` steps (receding horizon). Each window
-  has a budget of step attempts (``node_budget``), and the whole run the time budget of
-  the settings, so F always returns. A window that fails within its budget commits the
-  deepest sequence of steps it found; when it found none with the first
-  ``legs_per_level`` legs of the queue it is searched once more with every leg; none at
-  all then traces back across windows: the last committed one is planned again with its
-  most cautious moves first (at most ``MAX_WINDOW_RETRACES`` times a run), and only then
-  is the robot stuck;
+- the walk is planned in windows of ``lookahead`` steps (receding horizon), each a cycle
+  of the gait-queue driver (:class:`planner.planning.driver.GaitDriver`, whose stop rules
+  end the run). Each window has a budget of step attempts (``node_budget``), and the
+  whole run the time budget of the settings, so F always returns. A window that fails
+  within its budget commits the deepest sequence of steps it found; when it found none
+  with the first ``legs_per_level`` legs of the queue it is searched once more with every
+  leg; none at all then traces back across windows: the last committed one is planned
+  again with its most cautious moves first (at most ``MAX_WINDOW_RETRACES`` times a run),
+  and only then is the robot stuck;
 - a window may take up to ``node_budget`` attempts for its ``lookahead`` steps, so an
   attempt counts as a fraction of a cycle in the no-progress stop
   (``no_progress_cycles`` x node_budget / lookahead attempts);
@@ -29,11 +30,8 @@ cannot be made, go back as far as needed and try the earlier steps differently. 
   counts the windows refused). Each step already looks one leg ahead when it picks its
   foothold (:meth:`~planner.planning.local.LocalPlanner.next_leg_can_move`), and next to a
   tall edge refuses a landing the body could not pass over
-  (:meth:`~planner.planning.local.LocalPlanner.blocks_passage`: barrier75mm's hind foot 4.6 cm
-  before the barrier, knee ahead, stopped the walk 133 cm short). Asking it of
-  every leg (``check_all_legs``) refused sound windows: stairs with every leg checked
-  traced back 15 windows of 15 and stopped by its 240 s budget 0.6 m short; with the
-  next leg it reaches in 29 s, and up step10cm in 39 s instead of 110 s.
+  (:meth:`~planner.planning.local.LocalPlanner.blocks_passage`). Asking it of every leg
+  (``check_all_legs``) refuses sound windows, so it is asked only past a stall.
 
 Where it beats 8.2: the soft planner commits every step greedily and, when a leg then
 cannot step, only swaps legs and shortens that one leg's stride; the recursive planner
@@ -47,7 +45,9 @@ import math
 import time
 from dataclasses import dataclass, field, replace
 
-from planner.planning.local import LocalPlanner, NearestWalk, Step, Walk, _Run
+from planner.planning.driver import GaitDriver, NearestWalk, PlannedStates, Run, Walk
+from planner.planning.local import LocalPlanner
+from planner.planning.step import Step
 
 AMBITIONS = ((1.0, None), (0.6, None), (0.3, 0.6))  # (rho_3 stride fraction, rho_2 shrink)
 MAX_WINDOW_RETRACES = 4  # committed windows planned again when no step is left, per run
@@ -72,6 +72,7 @@ class _Budget(Exception):
 
 @dataclass
 class _Window:
+    driver: GaitDriver  # the run's (its failure log)
     rs: RecursiveSettings = field(default_factory=RecursiveSettings)  # its budgets
     attempts: int = 0
     best: list[Step] = field(default_factory=list)
@@ -95,7 +96,7 @@ class RecursivePlanner(LocalPlanner):
             "all_legs_windows": 0, "window_retraces": 0, "stall_retraces": 0,
         }  # fmt: skip
 
-    def F(self, walk: Walk, queue: tuple[int, ...], n: int, run: _Run, win: _Window, path):
+    def F(self, walk: Walk, queue: tuple[int, ...], n: int, run: Run, win: _Window, path):
         """Make ``n`` steps from ``walk.state``; returns the queue after them, or None.
 
         ``path`` holds the steps made so far in this window (for the best partial result).
@@ -124,7 +125,7 @@ class RecursivePlanner(LocalPlanner):
                 stride = self.stride_at(walk.state, leg, run.tau)
                 step = self.step(walk.state, leg, run.tau, stride * rho3, rho2)
                 if not step.ok:
-                    self.failed(run, step)
+                    win.driver.failed(step)
                     continue
                 mark = walk.mark()
                 walk.add(step)
@@ -144,83 +145,104 @@ class RecursivePlanner(LocalPlanner):
         rs = self.recursion
         return max(1, rs.node_budget // max(1, rs.lookahead))
 
-    def _search(self, walk: Walk, queue: tuple[int, ...], run: _Run, rs: RecursiveSettings):
+    def _search(self, driver: GaitDriver, queue: tuple[int, ...], rs: RecursiveSettings):
         """One window of F under the budgets ``rs``: (queue after it or None, the window)."""
-        win = _Window(rs)
+        win = _Window(driver, rs)
         try:
-            out = self.F(walk, queue, rs.lookahead, run, win, [])
+            out = self.F(driver.source.walk, queue, rs.lookahead, driver.run, win, [])
         except _Budget:
             out = None
         self.extra_stats["backtracks"] += win.backtracks
         self.extra_stats["dead_ends"] += win.dead_ends
         return out, win
 
-    def _run(self, walk: Walk, run: _Run) -> str:
-        queue = tuple(self.settings.gait)
-        committed: list[tuple[tuple, tuple[int, ...]]] = []  # (mark, queue) before each window
-        cautious = False
-        nearest, stalled = self.distance_to_goal(walk.state, run), 0
-        thorough_to = math.inf  # every leg checked while the COM is farther from the goal [m]
-        nearest_walk = NearestWalk()
-        while not (message := self.stop_reason(walk, run)):
-            self.extra_stats["windows"] += 1
-            root = walk.mark()
-            rs = self.recursion
-            if cautious:  # a window planned again: its most cautious moves first
-                rs = replace(rs, ambitions=tuple(reversed(rs.ambitions)))
-                cautious = False
-            if self.distance_to_goal(walk.state, run) > thorough_to:
-                rs = replace(rs, check_all_legs=True)  # past a stall: every leg checked
-            out, win = self._search(walk, queue, run, rs)
-            if out is None and not win.best and rs.legs_per_level < len(queue):
-                # not one step with the first legs of the queue: every leg before giving up
-                self.extra_stats["all_legs_windows"] += 1
-                out, win = self._search(walk, queue, run, replace(rs, legs_per_level=len(queue)))
-            if out is None:  # no full window: the deepest sequence found, if any
-                walk.rewind(root)
-                if not win.best:
-                    if committed and self.extra_stats["window_retraces"] < MAX_WINDOW_RETRACES:
-                        # trace back across windows (8.5: as far back as needed): the last
-                        # committed window is planned again, its most cautious moves first
-                        self.extra_stats["window_retraces"] += 1
-                        nearest_walk.offer(walk, self.distance_to_goal(walk.state, run))
-                        root, queue = committed.pop()
-                        walk.rewind(root)
-                        cautious = True
-                        continue
-                    message = (
-                        f"stuck: no step possible from here with any leg or ambition; last: "
-                        f"{run.last_failure}"
-                    )
-                    break
-                self.extra_stats["partial_windows"] += 1
-                for step in win.best:
-                    walk.add(step)
-                out = win.best_queue
-            committed.append((root, queue))
-            queue = out
-            self.report(walk, run)
-            d = self.distance_to_goal(walk.state, run)
-            nearest, stalled = (d, 0) if d < nearest - PROGRESS_M else (nearest, stalled + 1)
-            if (
-                stalled >= STALLED_WINDOWS
-                and len(committed) > stalled
-                and self.extra_stats["window_retraces"] < MAX_WINDOW_RETRACES
-            ):
-                # shuffling in place (hind legs that cannot follow the front ones over a
-                # barrier): the stalled windows and the one before are traced back (the
-                # second time: the whole walk) and planned again with every leg checked
-                # at their ends, until the COM is past where it stalled
-                self.extra_stats["window_retraces"] += 1
-                self.extra_stats["stall_retraces"] += 1
-                first = self.extra_stats["stall_retraces"] == 1
-                nearest_walk.offer(walk, d)
-                for _ in range(stalled + 1 if first else len(committed)):
-                    root, queue = committed.pop()
-                walk.rewind(root)
-                thorough_to = nearest - PROGRESS_M
-                nearest, stalled = self.distance_to_goal(walk.state, run), 0
-        return nearest_walk.settle(walk, self.distance_to_goal(walk.state, run), message)
+    def _run(self, walk: Walk, run: Run) -> str:
+        """Windows of F driven until a stop rule (:class:`planner.planning.driver.GaitDriver`)."""
+        windows = _Windows(self, walk, run)
+        message = GaitDriver(self, run, PlannedStates(walk)).drive(windows)
+        return windows.nearest_walk.settle(walk, self.distance_to_goal(walk.state, run), message)
+
+
+class _Windows:
+    """The driver's cycle of the recursive planner: one window of F, traced back (8.5)."""
+
+    def __init__(self, planner: RecursivePlanner, walk: Walk, run: Run):
+        self.planner, self.walk = planner, walk
+        self.queue = tuple(planner.settings.gait)
+        self.committed: list[tuple[tuple, tuple[int, ...]]] = []  # (mark, queue) before each
+        self.cautious = False
+        self.nearest, self.stalled = planner.distance_to_goal(walk.state, run), 0
+        self.thorough_to = math.inf  # every leg checked while the COM is farther [m]
+        self.nearest_walk = NearestWalk()
+
+    def __call__(self, driver: GaitDriver) -> str:
+        """Plan and commit one window; "" to go on, or why the planner is stuck."""
+        p, walk, run, stats = self.planner, self.walk, driver.run, self.planner.extra_stats
+        stats["windows"] += 1
+        root = walk.mark()
+        rs = p.recursion
+        if self.cautious:  # a window planned again: its most cautious moves first
+            rs = replace(rs, ambitions=tuple(reversed(rs.ambitions)))
+            self.cautious = False
+        if p.distance_to_goal(walk.state, run) > self.thorough_to:
+            rs = replace(rs, check_all_legs=True)  # past a stall: every leg checked
+        out, win = p._search(driver, self.queue, rs)
+        if out is None and not win.best and rs.legs_per_level < len(self.queue):
+            # not one step with the first legs of the queue: every leg before giving up
+            stats["all_legs_windows"] += 1
+            out, win = p._search(driver, self.queue, replace(rs, legs_per_level=len(self.queue)))
+        if out is None:  # no full window: the deepest sequence found, if any
+            walk.rewind(root)
+            if not win.best:
+                if self.committed and stats["window_retraces"] < MAX_WINDOW_RETRACES:
+                    # trace back across windows (8.5: as far back as needed): the last
+                    # committed window is planned again, its most cautious moves first
+                    stats["window_retraces"] += 1
+                    self.nearest_walk.offer(walk, p.distance_to_goal(walk.state, run))
+                    root, self.queue = self.committed.pop()
+                    walk.rewind(root)
+                    self.cautious = True
+                    return ""
+                return (
+                    f"stuck: no step possible from here with any leg or ambition; last: "
+                    f"{run.last_failure}"
+                )
+            stats["partial_windows"] += 1
+            for step in win.best:
+                walk.add(step)
+            out = win.best_queue
+        self.committed.append((root, self.queue))
+        self.queue = out
+        driver.report()
+        self._stall(driver)
+        return ""
+
+    def _stall(self, driver: GaitDriver) -> None:
+        """Trace back windows that bring the COM no nearer the goal (8.5)."""
+        p, walk, run, stats = self.planner, self.walk, driver.run, self.planner.extra_stats
+        d = p.distance_to_goal(walk.state, run)
+        if d < self.nearest - PROGRESS_M:
+            self.nearest, self.stalled = d, 0
+        else:
+            self.stalled += 1
+        if (
+            self.stalled >= STALLED_WINDOWS
+            and len(self.committed) > self.stalled
+            and stats["window_retraces"] < MAX_WINDOW_RETRACES
+        ):
+            # shuffling in place (hind legs that cannot follow the front ones over a
+            # barrier): the stalled windows and the one before are traced back (the
+            # second time: the whole walk) and planned again with every leg checked
+            # at their ends, until the COM is past where it stalled
+            stats["window_retraces"] += 1
+            stats["stall_retraces"] += 1
+            first = stats["stall_retraces"] == 1
+            self.nearest_walk.offer(walk, d)
+            for _ in range(self.stalled + 1 if first else len(self.committed)):
+                root, self.queue = self.committed.pop()
+            walk.rewind(root)
+            self.thorough_to = self.nearest - PROGRESS_M
+            self.nearest, self.stalled = p.distance_to_goal(walk.state, run), 0
 
 
 __all__ = ["AMBITIONS", "RecursivePlanner", "RecursiveSettings"]

@@ -13,6 +13,8 @@ One cycle moves one leg, as in figure 6 of the paper:
    with the next one and retried after it (comment ii of 8.2); a failed foothold is
    retried with a shorter stride.
 
+The cycles are the gait-queue driver's (:class:`planner.planning.driver.GaitDriver`,
+which also holds the stop rules); this module adds the stride and the tracing back.
 Beyond the paper (see :meth:`planner.planning.local.LocalPlanner.step`): footholds are moved
 off edges of the sharp terrain, and the body move keeps the swinging leg within reach of
 its next foothold. Where the greedy steps lead into a dead end (``RETRACE_FAILS`` failed
@@ -21,32 +23,27 @@ traced back ``RETRACE_STEPS`` steps before its best point and those steps are pl
 again with the foothold look-ahead of the recursive planner (8.5): each foothold must leave
 the next leg a body move. A dead end met again at the same point is traced back again
 with 8.5's less ambitious moves, shorter strides, and then from farther back
-(``RETRACES``), and only when none is left does it stop the planner. On step10cm the full
-strides put the front feet up the step with the hind feet stretched below, a stance no
-hind body move leaves; planned again alike it met the same dead end, and at 0.6 of the
-stride it climbed on one machine. On another its cause lay before the steps retraced: the
-right hind foot left 14 cm before the riser a crawl cycle earlier while the left one
-climbed, and from the same step at 0.6 and 0.3 of the stride the walk met the same stance
-(135 cm short); the 4th and 5th retraces start one and two crawl cycles farther back (it
-climbs at the 5th: 66 steps). They come after the first three, so a walk that got out
-with those is planned as before (mix4m's, which farther back at the 2nd retrace stalled
-108 cm short). The first retrace keeps the full stride: where one retrace sufficed the
-plans stay as they were (barrier9cm's soft plan, which walks in MuJoCo; its plan retraced
-at 0.6 fell there).
+(``RETRACES``: a dead end's cause may lie a crawl cycle or two before the steps
+retraced), and only when none is left does it stop the planner. The first retrace keeps
+the full stride, so a walk that one retrace gets out of is planned as without the later
+ones.
 """
 
 from __future__ import annotations
 
 from planner.motion.gait_queue import GaitQueue
-from planner.planning.local import (
+from planner.planning.driver import (
     PROGRESS_M,
+    GaitDriver,
     LocalPlan,
-    LocalPlanner,
-    LocalSettings,
     NearestWalk,
+    PlannedStates,
+    QueueCycle,
+    Run,
     Walk,
-    _Run,
 )
+from planner.planning.local import LocalPlanner, LocalSettings
+from planner.planning.step import Step
 
 RETRACE_FAILS = 4  # failed step attempts in a row that trigger a retrace
 RETRACE_STEPS = 4  # steps traced back before the best point (one crawl cycle)
@@ -56,7 +53,7 @@ RETRACES = ((0, 1.0), (0, 0.6), (0, 0.3), (1, 0.6), (2, 0.3))
 
 
 class SoftPlanner(LocalPlanner):
-    """The gait-queue driver of section 8.2 for one robot on one terrain."""
+    """The soft-persuasion planner of section 8.2 for one robot on one terrain."""
 
     name = "soft"
     fixed_sequence = False  # True: a failed leg waits a whole cycle (8.1's sequence S)
@@ -66,73 +63,83 @@ class SoftPlanner(LocalPlanner):
         super().__init__(robot, terrain, mu, settings)
         self.extra_stats = {"retraces": 0}
 
-    def _run(self, walk: Walk, run: _Run) -> str:
-        st = self.settings
-        queue = GaitQueue(st.gait)
-        step_scale = {i: 1.0 for i in range(4)}
-        fails_in_row = 0
-        # before each committed step: (walk mark, queue, run cycle)
-        history: list[tuple[tuple, tuple, int]] = []
-        retrace_dist = float("inf")  # the best distance to the goal at the last retrace
-        level = 0  # retraces at that point: the steps retraced take RETRACES[level - 1]
-        retrace_k = 0  # ... the first from this step of history
-        lookahead_until = -1  # walk steps up to which footholds are looked ahead
-        nearest_walk = NearestWalk()
-        while not (message := self.stop_reason(walk, run, fails_in_row)):
-            stalled = run.cycles - run.best_at >= st.no_progress_cycles // 2
-            new_point = run.best_dist_m < retrace_dist - PROGRESS_M
-            if (
-                self.retraces
-                and (fails_in_row >= RETRACE_FAILS or stalled)
-                and history
-                and (new_point or level < len(self.retraces))
-            ):
-                # a dead end: back to RETRACE_STEPS steps before the best point, and plan
-                # from there with the look-ahead and shorter strides (8.5's tracing back)
-                if new_point:  # full strides
-                    level, retrace_dist = 1, run.best_dist_m
-                    lookahead_until = walk.steps + LOOKAHEAD_STEPS
-                    at_best = max(k for k, h in enumerate(history) if h[2] <= run.best_at or k == 0)
-                    retrace_k = max(at_best - RETRACE_STEPS, 0)
-                else:  # the same dead end again: shorter strides, then farther back
-                    level += 1
-                back = self.retraces[level - 1][0] * RETRACE_STEPS
-                k = min(max(retrace_k - back, 0), len(history) - 1)
-                mark, legs, _ = history[k]
-                del history[k:]
-                nearest_walk.offer(walk, self.distance_to_goal(walk.state, run))
-                walk.rewind(mark)
-                queue = GaitQueue(legs)
-                step_scale = {i: 1.0 for i in range(4)}
-                fails_in_row = 0
-                run.best_at = run.cycles
-                self.extra_stats["retraces"] += 1
-            self.foothold_lookahead = walk.steps < lookahead_until
-            ambition = self.retraces[level - 1][1] if self.foothold_lookahead else 1.0
-            run.cycles += 1
-            mark = walk.mark()
-            before = tuple(queue)
-            leg = queue.pop()
-            stride = self.stride_at(walk.state, leg, run.tau) * step_scale[leg] * ambition
-            step = self.step(walk.state, leg, run.tau, stride)
-            walk.add(step)  # a failed placement keeps its body move
-            if not step.ok:
-                self.failed(run, step)
-                if step.phase == "foot_placement":
-                    step_scale[leg] = max(step_scale[leg] * 0.5, st.min_step_fraction)
-                fails_in_row += 1
-                if self.fixed_sequence:
-                    queue.push(leg)
-                else:
-                    queue.swap(leg, fails_in_row)
-                continue
-            history.append((mark, before, run.cycles))
-            step_scale[leg] = 1.0
-            fails_in_row = 0
-            queue.push(leg)
-            self.report(walk, run)
+    def _run(self, walk: Walk, run: Run) -> str:
+        """The driver's cycles (:class:`planner.planning.driver.GaitDriver`) with retraces."""
+        driver = GaitDriver(self, run, PlannedStates(walk), gait=self.settings.gait)
+        cycle = _Retracing(self, walk)
+        message = driver.drive(cycle)
         self.foothold_lookahead = False
-        return nearest_walk.settle(walk, self.distance_to_goal(walk.state, run), message)
+        return cycle.nearest_walk.settle(walk, self.distance_to_goal(walk.state, run), message)
+
+
+class _Retracing(QueueCycle):
+    """Soft's cycle: Lambda_t's stride, the walk traced back at a dead end (8.2 with 8.5)."""
+
+    def __init__(self, planner: SoftPlanner, walk: Walk):
+        self.planner, self.walk = planner, walk
+        self.fixed_sequence = planner.fixed_sequence
+        # before each committed step: (walk mark, queue, run cycle)
+        self.history: list[tuple[tuple, tuple, int]] = []
+        self.retrace_dist = float("inf")  # the best distance to the goal at the last retrace
+        self.level = 0  # retraces at that point: the steps retraced take RETRACES[level - 1]
+        self.retrace_k = 0  # ... the first from this step of history
+        self.lookahead_until = -1  # walk steps up to which footholds are looked ahead
+        self.nearest_walk = NearestWalk()
+        self.ambition = 1.0  # the stride's fraction in this cycle
+        self.mark: tuple = ()  # the walk and the queue before this cycle's step
+        self.queue_before: tuple = ()
+
+    def before(self, driver: GaitDriver) -> None:
+        """At a dead end, trace back; the look-ahead and stride of the cycle."""
+        p, run, walk = self.planner, driver.run, self.walk
+        stalled = run.cycles - run.best_at >= p.settings.no_progress_cycles // 2
+        new_point = run.best_dist_m < self.retrace_dist - PROGRESS_M
+        if (
+            p.retraces
+            and (run.fails_in_row >= RETRACE_FAILS or stalled)
+            and self.history
+            and (new_point or self.level < len(p.retraces))
+        ):
+            # a dead end: back to RETRACE_STEPS steps before the best point, and plan
+            # from there with the look-ahead and shorter strides (8.5's tracing back)
+            history = self.history
+            if new_point:  # full strides
+                self.level, self.retrace_dist = 1, run.best_dist_m
+                self.lookahead_until = walk.steps + LOOKAHEAD_STEPS
+                at_best = max(k for k, h in enumerate(history) if h[2] <= run.best_at or k == 0)
+                self.retrace_k = max(at_best - RETRACE_STEPS, 0)
+            else:  # the same dead end again: shorter strides, then farther back
+                self.level += 1
+            back = p.retraces[self.level - 1][0] * RETRACE_STEPS
+            k = min(max(self.retrace_k - back, 0), len(history) - 1)
+            mark, legs, _ = history[k]
+            del history[k:]
+            self.nearest_walk.offer(walk, p.distance_to_goal(walk.state, run))
+            walk.rewind(mark)
+            driver.queue = GaitQueue(legs)
+            driver.step_scale = {i: 1.0 for i in range(4)}
+            run.fails_in_row = 0
+            run.best_at = run.cycles
+            p.extra_stats["retraces"] += 1
+        p.foothold_lookahead = walk.steps < self.lookahead_until
+        self.ambition = p.retraces[self.level - 1][1] if p.foothold_lookahead else 1.0
+
+    def leg(self, driver: GaitDriver) -> int:
+        self.mark, self.queue_before = self.walk.mark(), tuple(driver.queue)
+        return driver.queue.pop()
+
+    def attempt(self, driver: GaitDriver, leg: int) -> Step:
+        """Lambda_t's stride, shortened after failed placements and by the ambition."""
+        p, walk, tau = self.planner, self.walk, driver.run.tau
+        stride = p.stride_at(walk.state, leg, tau) * driver.step_scale[leg] * self.ambition
+        step = p.step(walk.state, leg, tau, stride)
+        walk.add(step)  # a failed placement keeps its body move
+        return step
+
+    def stepped(self, driver: GaitDriver, leg: int, step: Step) -> None:
+        self.history.append((self.mark, self.queue_before, driver.run.cycles))
+        driver.queue.push(leg)
+        driver.report()
 
 
 class GreedyPlanner(SoftPlanner):

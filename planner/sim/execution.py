@@ -11,9 +11,11 @@ command are here too (this module uses :mod:`planner.sim.simulate`, never the re
 Feedback (8.3), :func:`run_feedback`: every cycle (one gait step) the soft-persuasion
 planner of 8.2 starts from the *measured* configuration: measured base pose and joints,
 the stance feet where the robot's feet actually are (projected onto the terrain), and
-plans the next step from there (Theta2 body move, Theta3 foothold, the same gait queue
-and failure handling as :meth:`planner.planning.soft.SoftPlanner.plan`), which the
-simulator then executes. Slip, rolling of the feet and servo compliance do not
+plans the next step from there (Theta2 body move, Theta3 foothold), which the simulator
+then executes. The cycles, the gait queue, its failure handling and the stop rules are
+the planners' driver's (:class:`planner.planning.driver.GaitDriver`), its states
+measured (:class:`MeasuredStates`), its cycle following the precomputed plan
+(:class:`PlanFollowing`). Slip, rolling of the feet and servo compliance do not
 accumulate: each step starts from the truth.
 
 Precompute-then-correct (8.4), :func:`run_corrected`: the precomputed plan is executed
@@ -42,6 +44,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from planner.core.errors import InputError
 from planner.planfile.plan import Plan, Samples, states_of_samples
+from planner.planning.driver import QueueCycle
 from planner.sim.simulate import (
     SimResult,
     SimSettings,
@@ -55,6 +58,8 @@ from planner.sim.simulate import (
 
 __all__ = [
     "Measurement",
+    "MeasuredStates",
+    "PlanFollowing",
     "SimulatedMocap",
     "StateSource",
     "blend_in",
@@ -345,40 +350,20 @@ def run_feedback(
 ) -> SimResult:
     """Walk to the plan's goal step by step from the measured state (8.3, with 8.4).
 
-    The robot starts, settled, at the plan's first configuration and follows the plan's
-    steps (:func:`planned_steps`), each from the measured state: the soft planner (section
-    8.2, ``local_settings``) plans the cycle (:meth:`planner.planning.local.LocalPlanner.step`)
-    onto the plan's foothold, with the body nearer the support's incentre if need be,
-    Theta2 also started from the plan's own body pose; where that step fails, the plan's
-    own step is executed, corrected from the measured state as in 8.4
-    (:func:`correct_cycle`; gen:14's trailing hind leg at a 7 cm step up), if the
-    corrected step passes the gates of :func:`_follow_corrected` (reach, balance, leg
-    links) and ``correct_plan_steps``; where no step planned anew is found at all, not
-    even a shorter one, its balance gate asks only the plan's path samples' margin
-    (barrier9cm's recursive plan: HR's step at its reach limit). With
-    ``plan_steps_first`` the corrected plan step comes first, wherever its gates pass:
-    the plan's body poses were looked ahead (8.5's windows), and step10cm's and mix4m's
-    recursive plans, whose steps re-planned from states a few millimetres off stalled
-    1.3 m and 1.2 m short, reach so; barrier75mm's recursive plan falls so at 28 s and
-    reaches with the default. The outcomes at such barriers flip with one step's
-    difference (chaotic); neither order wins everywhere
-    (``bench/results/physics_recursive.md``). After ``GUIDE_FAILS`` failed cycles in a
-    row, or a failure after half of ``no_progress_cycles`` without progress, the rest of
-    the walk is planned anew from the measured state (:func:`replan_rest`, at most
-    ``REPLANS`` times, also once the plan's steps were left) and its steps are followed
-    when it reaches the goal; else, or past the plan's last step, the gait queue and
-    Lambda_t take over. Measurements come from ``source`` (default:
+    The gait-queue driver of 8.2 (:class:`planner.planning.driver.GaitDriver`) with the
+    soft planner (``local_settings``, default: the plan's) runs cycles from the robot as
+    measured (:class:`MeasuredStates`), each step executed in the simulator at once. Its
+    cycles follow the plan's steps, correct them (8.4) and plan the rest anew
+    (:class:`PlanFollowing`). Measurements come from ``source`` (default:
     :class:`SimulatedMocap` of the simulator with ``noise``: position_noise_m,
     angle_noise_rad, joint_noise_rad, latency_s, seed). Stops at the goal, after
     ``max_cycles`` (default: twice the plan's cycles plus 20), after ``max_fails_in_row``
-    failed cycles in a row (a cycle fails when every ``BACKOFF`` attempt of its leg
-    fails: shorter steps, body nearer the support's incentre), when the COM has not come
-    1 cm closer to the goal in ``no_progress_cycles`` cycles, or on a fall.
+    failed cycles in a row, when the COM has not come 1 cm closer to the goal in
+    ``no_progress_cycles`` cycles (:meth:`planner.planning.driver.StopRules.for_feedback`),
+    or on a fall.
     """
-    from planner.body import stability
-    from planner.motion.gait_queue import GaitQueue
     from planner.motion.trajectory import Trajectory
-    from planner.planning.local import ARRIVAL_M
+    from planner.planning.driver import GaitDriver, Run, StopRules
     from planner.planning.soft import SoftPlanner
 
     wall0 = _time.perf_counter()
@@ -389,185 +374,239 @@ def run_feedback(
     st = local_settings or _planned_settings(plan)
     local = SoftPlanner(robot, terrain, mu=plan.friction, settings=st)
     tau = Trajectory.straight(plan.start[:2], plan.goal[:2], terrain, local.com_height_m())
-    goal = plan.goal[:2]
     n_plan = max(len(cycle_starts(plan.samples.contact)), 1)
     max_cycles = max_cycles if max_cycles is not None else 2 * n_plan + 20
-    queue = GaitQueue(st.gait)
-    guide, g, followed, corrected = planned_steps(plan), 0, 0, 0
-    guide_poses, guide_knees = planned_body_poses(plan), planned_knees(plan)
-    guide_cycles = plan_step_cycles(plan) if correct_plan_steps else None
-    s_plan, centres = plan.samples, plan.foot_centres_W()
-    step_scale = {i: 1.0 for i in range(4)}
-    fails, cycles, steps, best, best_at, arrivals = 0, 0, 0, math.inf, 0, 0
-    replanned_at = 0  # the cycle of the last re-plan
-    replans = []  # the re-plans made (8.3): their steps, reaching or not
+    states = MeasuredStates(src, robot, terrain, ex, local)
+    rules = StopRules.for_feedback(st, max_cycles, no_progress_cycles, MAX_ARRIVALS)
+    driver = GaitDriver(local, Run(plan.goal[:2], tau, wall0), states, rules, gait=st.gait)
+    follow = PlanFollowing(
+        plan, states, st, no_progress_cycles, correct_plan_steps, plan_steps_first
+    )
     m = ex.monitor.metrics
-
-    def plan_step_corrected(meas, g: int, balance_m=None, refused=None):
-        """The guide's step g, corrected from ``meas`` and executed (:func:`_follow_corrected`)."""
-        cycle = guide_cycles[g]  # of the guide in force (a re-plan's once followed)
-        return _follow_corrected(
-            ex, meas, robot, terrain, s_plan, centres, *cycle, sim, local, refused, balance_m
-        )
-
     try:
-        while True:
-            meas = src.measure()
-            state = measured_state(robot, terrain, meas)
-            dist = float(np.linalg.norm(local.check.com_W(state)[:2] - goal))
-            if dist < best - 0.01:
-                best, best_at = dist, cycles
-            if ex.stopped:
-                message = f"fell at {m.fall_time_s:.1f} s ({m.fall_reason})"
-                break
-            if arrivals < MAX_ARRIVALS and dist > ARRIVAL_M and cycles < max_cycles:
-                # the goal inside the measured four-foot support: the planner's arrival
-                # move from here (:meth:`LocalPlanner.arrival`), instead of stepping or
-                # stopping at the tolerance's edge
-                moved = local.arrival(state, goal, tau, dist <= st.goal_tol_m)
-                if moved is not None:
-                    arrivals += 1
-                    cycles += 1
-                    end, path = moved
-                    times = np.concatenate([[0.0], local.body_offsets_s(path)])
-                    if not _execute(ex, robot, sim, path, times):
-                        message = f"fell at {m.fall_time_s:.1f} s ({m.fall_reason})"
-                        break
-                    continue
-            if dist <= st.goal_tol_m:
-                message = f"reached the goal: measured COM {100 * dist:.1f} cm from it"
-                break
-            if cycles >= max_cycles:
-                message = f"stopped after {cycles} cycles (max_cycles)"
-                break
-            if fails >= st.max_fails_in_row:
-                message = f"stuck: {fails} failed step attempts in a row"
-                break
-            if cycles - best_at >= no_progress_cycles:
-                message = f"no progress in {no_progress_cycles} cycles "
-                message += f"(COM {100 * dist:.0f} cm from goal)"
-                break
-            # one cycle of the soft planner (SoftPlanner._run), from the measured state
-            cycles += 1
-            guided = g < len(guide)
-            leg = guide[g][0] if guided else queue.pop()
-            step, on_plan, ran = None, False, None
-            # the plan's own step, corrected from the measured state (8.4), where its gates
-            # pass: first with plan_steps_first (the plan's body poses were looked ahead),
-            # else where no step planned anew reaches the plan's foothold (a hind leg
-            # stretched behind a step up), from this measurement
-            may_correct = guided and guide_cycles is not None
-            refused: list[str] = []
-            if may_correct and plan_steps_first:
-                ran = plan_step_corrected(meas, g, refused=refused)
-                if refused:
-                    local._log_failure(cycles, leg, "corrected_step", state, refused[-1])
-            if guided and ran is None:  # the plan's foothold, from a body ever nearer the incentre
-                for _, shrink in BACKOFF:
-                    step = local.step(
-                        state, leg, tau, local.stride_m(), shrink, guide[g][1], False,
-                        body_hint=guide_poses[g], knee=guide_knees[g],
-                    )  # fmt: skip
-                    if step.ok:
-                        on_plan = True
-                        break
-                if may_correct and not plan_steps_first and not step.ok:
-                    ran = plan_step_corrected(meas, g)
-                    if ran is not None:
-                        why = f"{step.diagnosis}; executed the plan's step, corrected (8.4)"
-                        local._log_failure(cycles, leg, step.phase, state, why)
-            if ran is None:
-                # back off before giving a leg up: shorter steps over a more centred body
-                # (8.5's ambitions); a failed body move leaves the robot standing where it
-                # was measured
-                for frac, shrink in BACKOFF if step is None or not step.ok else ():
-                    stride = local.stride_at(state, leg, tau) * step_scale[leg] * frac
-                    step = local.step(state, leg, tau, stride, shrink)
-                    if step.ok:
-                        break
-                if may_correct and not step.ok:
-                    # no step planned anew at all: the plan's own step, corrected, held to
-                    # the balance margin the plan's path samples keep (20 mm) instead of
-                    # the keyframes' 25 mm, rather than a failed cycle that leaves the plan
-                    # (barrier9cm's recursive plan: HR's step at its reach limit, 22.5 mm
-                    # in the plan, 23.8 mm corrected; refused, the robot left the plan
-                    # and stalled 127 cm short)
-                    margin_m = stability.PATH_BALANCE_MARGIN_M
-                    ran = plan_step_corrected(meas, g, balance_m=margin_m)
-                    if ran is not None:
-                        why = f"{step.diagnosis}; executed the plan's step, corrected (8.4), "
-                        why += f"{margin_m * 1000:.0f} mm inside its supports"
-                        local._log_failure(cycles, leg, step.phase, state, why)
-            if ran is not None:
-                g, fails, steps, corrected = g + 1, 0, steps + 1, corrected + 1
-                m.cycles += 1
-                if g == len(guide):
-                    queue = _queue_after(st.gait, leg)
-                if not ran:
-                    message = f"fell at {m.fall_time_s:.1f} s ({m.fall_reason})"
-                    break
-                continue
-            if step.ok:
-                step_scale[leg] = 1.0
-                fails = 0
-                steps += 1
-                if guided:
-                    g += 1
-                    followed += int(on_plan)
-                    if g == len(guide):
-                        queue = _queue_after(st.gait, leg)
-                else:
-                    queue.push(leg)
-            else:
-                if step.phase == "foot_placement":
-                    step_scale[leg] = max(step_scale[leg] * 0.5, st.min_step_fraction)
-                fails += 1
-                new = None
-                # the plan's steps no longer fit, the gait queue's fail, or failures come
-                # between steps that bring the COM no nearer the goal (a livelock that
-                # never fails GUIDE_FAILS times in a row): the rest planned anew
-                stalled = cycles - max(best_at, replanned_at) >= no_progress_cycles // 2
-                if (fails >= GUIDE_FAILS or stalled) and len(replans) < REPLANS:
-                    new = replan_rest(robot, terrain, plan.friction, st, state, goal, tau)
-                    replans.append(0 if new is None else len(planned_steps(new)))
-                    replanned_at = cycles
-                if new is not None:
-                    guide, guide_poses = planned_steps(new), planned_body_poses(new)
-                    guide_knees = planned_knees(new)
-                    guide_cycles = plan_step_cycles(new) if correct_plan_steps else None
-                    s_plan, centres, g, fails = new.samples, new.foot_centres_W(), 0, 0
-                elif guided and fails >= GUIDE_FAILS:  # the plan's steps no longer fit
-                    g = len(guide)
-                    queue = _queue_after(st.gait, leg)  # the leg that failed goes last
-                elif not guided:
-                    queue.swap(leg, fails)
-                m.replans += 1
-                where = step.moved if step.moved is not None else state
-                local._log_failure(cycles, leg, step.phase, where, step.diagnosis)
-            if step.moved is None:
-                continue  # the body move failed: nothing to execute
-            path, times = local.step_samples(step)  # the planner's own time law
-            if not _execute(ex, robot, sim, path, times):
-                message = f"fell at {m.fall_time_s:.1f} s ({m.fall_reason})"
-                break
+        message = driver.drive(follow)
     except KeyboardInterrupt:
         ex.interrupt()
         message = m.message
     m.message = message
     extra = {
         "feedback": {
-            "steps": steps,
-            "cycles": cycles,
-            "plan_steps": len(guide),
-            "plan_steps_followed": followed,  # landed on the plan's foothold
-            "plan_steps_corrected": corrected,  # the plan's own step, corrected (8.4)
-            "replans": replans,  # steps of each re-plan of the rest (0: it did not reach)
-            "arrivals": arrivals,  # arrival moves executed (four feet, COM over the goal)
+            "steps": follow.steps,
+            "cycles": driver.run.cycles,
+            "plan_steps": len(follow.guide),
+            "plan_steps_followed": follow.followed,  # landed on the plan's foothold
+            "plan_steps_corrected": follow.corrected,  # the plan's own step, corrected (8.4)
+            "replans": follow.replans,  # steps of each re-plan of the rest (0: it did not reach)
+            "arrivals": driver.run.arrivals,  # arrival moves executed (four feet, COM over goal)
             "planner_solves": local.stats,
             "planner_failures": local.failures[-50:],
         }
     }
     return finish_run(plan, ex, wall0, t0, extra)
+
+
+def _fell(ex) -> str:
+    """The stop message of a fall."""
+    m = ex.monitor.metrics
+    return f"fell at {m.fall_time_s:.1f} s ({m.fall_reason})"
+
+
+class MeasuredStates:
+    """The driver's source of states in feedback (8.3): the robot as measured.
+
+    Every :meth:`state` is a new measurement of ``source`` (:func:`measured_state`), the
+    last kept in ``meas`` and ``last`` for the cycle planned from it; moves are executed
+    in the simulator of the run ``ex`` at the planner's (``local``) time law.
+    """
+
+    def __init__(self, source: StateSource, robot, terrain, ex, local):
+        self.source, self.robot, self.terrain = source, robot, terrain
+        self.ex, self.sim, self.local = ex, ex.sim, local
+        self.meas: Measurement | None = None
+        self.last = None
+
+    def state(self):
+        """A new measurement's state."""
+        self.meas = self.source.measure()
+        self.last = measured_state(self.robot, self.terrain, self.meas)
+        return self.last
+
+    def stamp(self) -> float:
+        """The last measurement's time [s]."""
+        return self.meas.time_s
+
+    def halted(self) -> str:
+        """The robot fell."""
+        return _fell(self.ex) if self.ex.stopped else ""
+
+    def arrive(self, end, path: list) -> str:
+        """Execute an arrival move (four feet, the COM over the goal)."""
+        times = np.concatenate([[0.0], self.local.body_offsets_s(path)])
+        return self.execute(path, times)
+
+    def execute(self, path: list, times: _Array) -> str:
+        """Follow planned states ``path`` at ``times``; "" or the fall's message."""
+        return "" if _execute(self.ex, self.robot, self.sim, path, times) else _fell(self.ex)
+
+
+class PlanFollowing(QueueCycle):
+    """Feedback's cycle (8.3 with 8.4): the precomputed plan's steps from measured states.
+
+    The driver's leg is the plan's next step's (:func:`planned_steps`) while there is
+    one, else the gait queue's. Its step is planned from the measured state
+    (:meth:`attempt`): onto the plan's foothold (the body nearer the support's incentre
+    at each ``BACKOFF``, Theta2 started from the plan's body pose, the plan's knee
+    branch), else with Lambda_t's stride; where none is found the plan's own step is
+    executed, corrected as in 8.4 (:func:`_follow_corrected`, its gates passed), first
+    with ``plan_steps_first``. After ``GUIDE_FAILS`` failed cycles in a row, or a failure
+    after half of ``no_progress_cycles`` without progress, the rest of the walk is
+    planned anew (:func:`replan_rest`, at most ``REPLANS`` times) and followed when it
+    reaches the goal; else, or past the plan's last step, the gait queue and Lambda_t
+    take over. Every step is executed once made (:meth:`after`).
+    """
+
+    def __init__(self, plan: Plan, states: MeasuredStates, settings, no_progress_cycles: int,
+                 correct_plan_steps: bool = True, plan_steps_first: bool = False):  # fmt: skip
+        self.plan, self.states, self.st = plan, states, settings
+        self.local, self.ex = states.local, states.ex
+        self.no_progress_cycles = no_progress_cycles
+        self.correct_plan_steps = correct_plan_steps
+        self.plan_steps_first = plan_steps_first
+        self.follow(plan)
+        self.steps = self.followed = self.corrected = 0
+        self.replanned_at = 0  # the cycle of the last re-plan
+        self.replans: list[int] = []  # the re-plans made (8.3): their steps, reaching or not
+        self.guided = self.on_plan = False  # this cycle's leg is the plan's; on its foothold
+        self.ran: bool | None = None  # this cycle executed the plan's step, corrected: upright
+
+    def follow(self, plan: Plan) -> None:
+        """Follow ``plan``'s steps from its first (the guide)."""
+        self.guide, self.poses = planned_steps(plan), planned_body_poses(plan)
+        self.knees = planned_knees(plan)
+        self.ranges = plan_step_cycles(plan) if self.correct_plan_steps else None
+        self.samples, self.centres, self.g = plan.samples, plan.foot_centres_W(), 0
+
+    def leg(self, driver) -> int:
+        """The guide's next step's leg, else the queue's front."""
+        self.guided = self.g < len(self.guide)
+        return self.guide[self.g][0] if self.guided else driver.queue.pop()
+
+    def corrected_step(self, g: int, balance_m=None, refused=None):
+        """The guide's step g, corrected from the measurement and executed, or None (8.4)."""
+        a, b = self.ranges[g]
+        return _follow_corrected(
+            self.ex, self.states.meas, self.states.robot, self.states.terrain, self.samples,
+            self.centres, a, b, self.ex.sim, self.local, refused, balance_m,
+        )  # fmt: skip
+
+    def attempt(self, driver, leg: int):
+        """The cycle's step from the measured state; None: the plan's own step was executed."""
+        local, state, g, cycle = self.local, self.states.last, self.g, driver.run.cycles
+        step, self.on_plan, self.ran = None, False, None
+        # the plan's own step, corrected from the measured state (8.4), where its gates
+        # pass: first with plan_steps_first (the plan's body poses were looked ahead),
+        # else where no step planned anew reaches the plan's foothold
+        may_correct = self.guided and self.ranges is not None
+        if may_correct and self.plan_steps_first:
+            refused: list[str] = []
+            self.ran = self.corrected_step(g, refused=refused)
+            if refused:
+                local._log_failure(cycle, leg, "corrected_step", state, refused[-1])
+        if self.guided and self.ran is None:  # the plan's foothold, the body ever more centred
+            for _, shrink in BACKOFF:
+                step = local.step(
+                    state, leg, driver.run.tau, local.stride_m(), shrink, self.guide[g][1],
+                    False, body_hint=self.poses[g], knee=self.knees[g],
+                )  # fmt: skip
+                if step.ok:
+                    self.on_plan = True
+                    break
+            if may_correct and not self.plan_steps_first and not step.ok:
+                self.ran = self.corrected_step(g)
+                if self.ran is not None:
+                    why = f"{step.diagnosis}; executed the plan's step, corrected (8.4)"
+                    local._log_failure(cycle, leg, step.phase, state, why)
+        if self.ran is None:
+            step = self.anew(driver, leg, step)
+        if self.ran is None:
+            return step
+        self.g, self.steps, self.corrected = self.g + 1, self.steps + 1, self.corrected + 1
+        driver.run.fails_in_row = 0
+        self.ex.monitor.metrics.cycles += 1
+        if self.g == len(self.guide):
+            driver.queue = _queue_after(self.st.gait, leg)
+        return None
+
+    def anew(self, driver, leg: int, step):
+        """Lambda_t's step where ``step`` (onto the plan's foothold) is None or failed.
+
+        Shorter steps over a more centred body before the leg is given up (8.5's
+        ambitions); a failed body move leaves the robot standing where it was measured.
+        Where none is found, the plan's own step, corrected, held to the balance margin
+        the plan's path samples keep (``PATH_BALANCE_MARGIN_M``) instead of the
+        keyframes' (sets ``ran``).
+        """
+        from planner.body import stability
+
+        local, state, tau = self.local, self.states.last, driver.run.tau
+        for frac, shrink in BACKOFF if step is None or not step.ok else ():
+            stride = local.stride_at(state, leg, tau) * driver.step_scale[leg] * frac
+            step = local.step(state, leg, tau, stride, shrink)
+            if step.ok:
+                break
+        if self.guided and self.ranges is not None and not step.ok:
+            margin_m = stability.PATH_BALANCE_MARGIN_M
+            self.ran = self.corrected_step(self.g, balance_m=margin_m)
+            if self.ran is not None:
+                why = f"{step.diagnosis}; executed the plan's step, corrected (8.4), "
+                why += f"{margin_m * 1000:.0f} mm inside its supports"
+                local._log_failure(driver.run.cycles, leg, step.phase, state, why)
+        return step
+
+    def stepped(self, driver, leg: int, step) -> None:
+        """The guide's next step, or (off the guide) the leg to the queue's back."""
+        self.steps += 1
+        if not self.guided:
+            driver.queue.push(leg)
+            return
+        self.g += 1
+        self.followed += int(self.on_plan)
+        if self.g == len(self.guide):
+            driver.queue = _queue_after(self.st.gait, leg)
+
+    def missed(self, driver, leg: int, step) -> None:
+        """A failed cycle: the rest planned anew, the guide left, or the queue's swap.
+
+        The plan's steps no longer fit, the gait queue's fail, or failures come between
+        steps that bring the COM no nearer the goal (a livelock that never fails
+        ``GUIDE_FAILS`` times in a row): the rest is planned anew from the measured state.
+        """
+        run, new = driver.run, None
+        stalled = run.cycles - max(run.best_at, self.replanned_at) >= self.no_progress_cycles // 2
+        if (run.fails_in_row >= GUIDE_FAILS or stalled) and len(self.replans) < REPLANS:
+            new = replan_rest(
+                self.states.robot, self.states.terrain, self.plan.friction, self.st,
+                self.states.last, self.plan.goal[:2], run.tau,
+            )  # fmt: skip
+            self.replans.append(0 if new is None else len(planned_steps(new)))
+            self.replanned_at = run.cycles
+        if new is not None:
+            self.follow(new)
+            run.fails_in_row = 0
+        elif self.guided and run.fails_in_row >= GUIDE_FAILS:  # the plan's steps no longer fit
+            self.g = len(self.guide)
+            driver.queue = _queue_after(self.st.gait, leg)  # the leg that failed goes last
+        elif not self.guided:
+            driver.queue.swap(leg, run.fails_in_row)
+        self.ex.monitor.metrics.replans += 1
+
+    def after(self, driver, step) -> str:
+        """Execute the step's body move and swing (the planner's time law); a fall stops."""
+        if step is None:  # the plan's step, corrected, was executed
+            return "" if self.ran else _fell(self.ex)
+        if step.moved is None:
+            return ""  # the body move failed: nothing to execute
+        return self.states.execute(*self.local.step_samples(step))
 
 
 def _planned_settings(plan):
