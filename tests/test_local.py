@@ -510,6 +510,9 @@ def test_a_path_from_a_start_out_of_reach_may_only_come_back_into_reach(flat_pla
     assert lp.path_problem(path([0.004, 0.003, 0.001, 0.0, 0.0])) == ""
     why = lp.path_problem(path([0.004, 0.003, 0.005, 0.0]))
     assert "sample 2 of the path leaves the reach of HR" in why
+    from planner.core.failures import FailureKind
+
+    assert why.kind is FailureKind.REACH
     # a path that left the reach after being in it is refused as before
     assert "sample 2" in lp.path_problem(path([0.0, 0.0, 0.001, 0.0]))
 

@@ -458,6 +458,9 @@ def test_theta2_on_a_support_narrower_than_the_balance_margin_solves_nothing(dog
     sol = problem.solve(start, rc, u_f, u_n)
     assert not solves and not sol.feasible and sol.status == "support_too_small"
     assert "'balance_margin'" in sol.diagnosis and "inradius" in sol.diagnosis
+    from planner.core.failures import FailureKind
+
+    assert sol.failure == (FailureKind.BALANCE_MARGIN,)  # the kind the planners branch on
     assert sol.violations == {"balance_margin": pytest.approx(margin - room)}
     # the reference: IPOPT from the start
     p = problem.params(start, rc, u_f, u_n)

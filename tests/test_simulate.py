@@ -7,15 +7,9 @@ from planner.cli.main import main
 from planner.motion.footholds import MIN_ADVANCE_M
 from planner.planfile.plan import Plan, Samples
 from planner.planning.walk import plan_walk
-from planner.sim.execution import (
-    Measurement,
-    SimulatedMocap,
-    plan_step_cycles,
-    planned_steps,
-    run_corrected,
-    run_feedback,
-    shift_body,
-)
+from planner.sim.correction import run_corrected, shift_body
+from planner.sim.feedback import plan_step_cycles, planned_steps, run_feedback
+from planner.sim.measure import Measurement, SimulatedMocap
 from planner.sim.simulate import (
     SimSettings,
     Simulator,
@@ -391,7 +385,7 @@ def test_a_corrected_plan_step_that_fails_a_gate_is_not_executed(short_plan, mon
     import planner.body.stability
     from planner.planning.local import LocalPlanner
     from planner.planning.soft import SoftPlanner
-    from planner.sim.execution import _follow_corrected
+    from planner.sim.correction import _follow_corrected
     from planner.sim.simulate import new_run
 
     robot, terrain = short_plan.load_robot(), short_plan.load_terrain()
@@ -445,7 +439,7 @@ def test_a_corrected_step_brings_the_body_back_at_the_planners_body_speed(short_
     import planner.body.stability
     from planner.body.kinematics import hip_point_B
     from planner.planning.local import BODY_ACCEL_M_S2
-    from planner.sim.execution import (
+    from planner.sim.correction import (
         _correction_time_s,
         _follow_corrected,
         _four_feet_span_s,
@@ -489,7 +483,7 @@ def test_a_correction_keeps_a_leg_on_the_plans_other_knee(short_plan):
     (barrier75mm: the FR shank 33 mm into the barrier)."""
     from planner.body.kinematics import kinematics_of
     from planner.core.lie import rotation_from_quat
-    from planner.sim.execution import correct_cycle
+    from planner.sim.correction import correct_cycle
 
     robot, s = short_plan.load_robot(), short_plan.samples
     kin = kinematics_of(robot)
@@ -521,10 +515,10 @@ def test_a_correction_keeps_a_leg_on_the_plans_other_knee(short_plan):
 def test_feedback_replans_the_rest_when_the_plans_steps_fail(short_plan, monkeypatch):
     """Every step fails from the measured state until the rest of the walk is planned anew
     from it (8.3): the walk then follows the new plan's steps onto its footholds."""
-    import planner.sim.execution as execution
+    import planner.sim.feedback as feedback
     from planner.planning.local import LocalPlanner
 
-    real_step, real_replan = LocalPlanner.step, execution.replan_rest
+    real_step, real_replan = LocalPlanner.step, feedback.replan_rest
     made = []
 
     def step(self, *args, **kw):
@@ -541,7 +535,7 @@ def test_feedback_replans_the_rest_when_the_plans_steps_fail(short_plan, monkeyp
         return new
 
     monkeypatch.setattr(LocalPlanner, "step", step)
-    monkeypatch.setattr(execution, "replan_rest", replan)
+    monkeypatch.setattr(feedback, "replan_rest", replan)
     res = run_feedback(short_plan, max_cycles=8, correct_plan_steps=False)
     m, fb = res.metrics, res.executed.stats["feedback"]
     new = made[1]
@@ -559,10 +553,10 @@ def test_feedback_replans_again_once_the_plans_steps_were_left(short_plan, monke
     steps; when its steps fail too, the rest is planned anew once more (REPLANS = 2; the
     second was never used: barrier9cm's recursive plan stalled 127 cm short so) and the
     walk follows that plan's steps."""
-    import planner.sim.execution as execution
+    import planner.sim.feedback as feedback
     from planner.planning.local import LocalPlanner
 
-    real_step, real_replan = LocalPlanner.step, execution.replan_rest
+    real_step, real_replan = LocalPlanner.step, feedback.replan_rest
     made = []
 
     def step(self, *args, **kw):
@@ -579,7 +573,7 @@ def test_feedback_replans_again_once_the_plans_steps_were_left(short_plan, monke
         return made[-1]
 
     monkeypatch.setattr(LocalPlanner, "step", step)
-    monkeypatch.setattr(execution, "replan_rest", replan)
+    monkeypatch.setattr(feedback, "replan_rest", replan)
     res = run_feedback(short_plan, max_cycles=6, correct_plan_steps=False)
     m, fb = res.metrics, res.executed.stats["feedback"]
     assert len(made) == 2 and made[1] is not None, made
@@ -595,7 +589,7 @@ def test_a_replan_is_followed_only_when_it_reaches_the_goal(short_plan, monkeypa
     from planner.motion.trajectory import Trajectory
     from planner.planning.local import LocalPlanner
     from planner.planning.soft import SoftPlanner
-    from planner.sim.execution import _planned_settings, replan_rest
+    from planner.sim.feedback import _planned_settings, replan_rest
 
     robot, terrain = short_plan.load_robot(), short_plan.load_terrain()
     st = _planned_settings(short_plan)
@@ -626,7 +620,7 @@ def test_a_replan_is_followed_only_when_it_reaches_the_goal(short_plan, monkeypa
 def test_planned_body_poses_are_the_plans_at_each_step(short_plan):
     """Each step's body pose is one the plan passes in that step (the swing keyframe's),
     with every foot on the ground where that step starts (the Theta2 hint of feedback)."""
-    from planner.sim.execution import planned_body_poses
+    from planner.sim.feedback import planned_body_poses
 
     steps, poses = planned_steps(short_plan), planned_body_poses(short_plan)
     cycles, s = plan_step_cycles(short_plan), short_plan.samples
@@ -647,7 +641,8 @@ def test_a_correction_turns_the_body_from_its_measured_attitude(short_plan):
     corrected base starts at the measured pose, reaches the plan's when the first leg
     lifts, and the stance feet stay on their measured centres throughout."""
     from planner.core.lie import quat_from_rotation, rotation_from_quat, rotation_from_vector
-    from planner.sim.execution import _foot_centres, correct_cycle
+    from planner.sim.correction import correct_cycle
+    from planner.sim.measure import _foot_centres
 
     robot, s = short_plan.load_robot(), short_plan.samples
     a, b = plan_step_cycles(short_plan)[1]
@@ -680,10 +675,11 @@ def test_a_correction_moves_the_body_toward_a_foot_out_of_reach(short_plan, monk
     stalled). The corrected body moves toward it by one offset (at most REACH_SHIFT_M),
     taken on over the four-feet phase from the measured pose, and FK of the corrected
     joints puts the stance feet on their measured centres plus the plan's rolling."""
-    import planner.sim.execution as execution
+    import planner.sim.correction as correction
     from planner.body.kinematics import kinematics_of
     from planner.core.lie import rotation_from_quat
-    from planner.sim.execution import REACH_SHIFT_M, _foot_centres, correct_cycle
+    from planner.sim.correction import REACH_SHIFT_M, correct_cycle
+    from planner.sim.measure import _foot_centres
 
     robot, s = short_plan.load_robot(), short_plan.samples
     kin = kinematics_of(robot)
@@ -698,7 +694,7 @@ def test_a_correction_moves_the_body_toward_a_foot_out_of_reach(short_plan, monk
     joints[leg] = ik.joints_rad
     meas = Measurement(0.0, robot.q_from(q_plan[0, :3], q_plan[0, 3:7], joints), np.ones(4, bool))
     times = s.time[a : b + 1]
-    monkeypatch.setattr(execution, "REACH_SHIFT_M", 0.0)
+    monkeypatch.setattr(correction, "REACH_SHIFT_M", 0.0)
     q_plain, plain_misses = correct_cycle(robot, q_plan, contact, centres, meas, times)
     monkeypatch.undo()
     q, misses = correct_cycle(robot, q_plan, contact, centres, meas, times)
@@ -721,7 +717,7 @@ def test_a_corrected_swing_keeps_the_plans_joints_where_ik_leaves_them(short_pla
     plan's (step10cm's recursive plan: the HR knee 66 degrees off, the foot on the step's
     edge, a fall) the swing leg keeps the plan's joints; small corrections are IK's."""
     from planner.body.kinematics import kinematics_of
-    from planner.sim.execution import SWING_JUMP_RAD, correct_cycle
+    from planner.sim.correction import SWING_JUMP_RAD, correct_cycle
 
     robot, s = short_plan.load_robot(), short_plan.samples
     a, b = plan_step_cycles(short_plan)[1]
@@ -755,7 +751,7 @@ def test_a_feedback_run_that_executes_nothing_ends_standing(short_plan, monkeypa
     """No step succeeds from the measured state and the plan's steps are not corrected:
     the run stops stuck, judged on the settled start it held (it raised an IndexError from
     the monitor's empty reference), and says so in one line."""
-    import planner.sim.execution as execution
+    import planner.sim.feedback as feedback
     from planner.planning.local import LocalPlanner
 
     real = LocalPlanner.step
@@ -767,7 +763,7 @@ def test_a_feedback_run_that_executes_nothing_ends_standing(short_plan, monkeypa
         return out
 
     monkeypatch.setattr(LocalPlanner, "step", step)
-    monkeypatch.setattr(execution, "replan_rest", lambda *a: None)
+    monkeypatch.setattr(feedback, "replan_rest", lambda *a: None)
     res = run_feedback(short_plan, max_cycles=4, correct_plan_steps=False)
     m, fb = res.metrics, res.executed.stats["feedback"]
     assert fb["steps"] == 0 and not (m.fell or m.tipped), m.summary()

@@ -231,7 +231,7 @@ def test_feedback_replans_with_the_settings_the_plan_was_made_with():
     """A plan made with a gentler time law and another gait is walked with them (8.3)."""
     from planner.planning.local import LocalSettings
     from planner.planning.walk import plan_walk
-    from planner.sim.execution import _planned_settings
+    from planner.sim.feedback import _planned_settings
 
     settings = LocalSettings(body_accel_m_s2=0.2, swing_time_s=0.7, gait=(0, 3, 1, 2))
     plan, report = plan_walk("littledog", "flat", (0.3, 0.0), (0.2, 0.0), settings=settings)

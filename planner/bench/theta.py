@@ -33,7 +33,6 @@ Theta3
 
 from __future__ import annotations
 
-import json
 import os
 import sys
 import time
@@ -44,6 +43,7 @@ from typing import Any
 
 import numpy as np
 
+from planner.bench.theta_report import dump_json, render_markdown
 from planner.body.state import State
 from planner.core.machine import machine_info
 from planner.core.outputs import write_atomic
@@ -540,14 +540,6 @@ def _records_json(
     }
 
 
-def _dump_json(result: dict[str, Any]) -> str:
-    """Indented JSON, with the per-instance columns one compact line per group."""
-    head = {k: v for k, v in result.items() if k != "instances"}
-    text = json.dumps(_jsonable(head), indent=1)
-    rows = ",\n  ".join(json.dumps(_jsonable(g)) for g in result["instances"])
-    return text[:-2] + ',\n "instances": [\n  ' + rows + "\n ]\n}\n"
-
-
 def run_theta_bench(
     n_per_theta: int = 200,
     terrains: tuple[str, ...] | list[str] = ("flat", "rough2cm"),
@@ -612,83 +604,21 @@ def run_theta_bench(
             )
             gen_time[f"{theta}/{tname}"] = time.perf_counter() - t0
             m = len(instances)
-            if slsqp_n is None or slsqp_n >= m:
-                sl_idx = list(range(m))
-            else:
-                pick = np.random.default_rng(seed + 7).choice(m, slsqp_n, replace=False)
-                sl_idx = sorted(int(k) for k in pick)
-            twins = [
-                compiled.twin(robot, terrain, inst.problem, cache) if compiled else None
-                for inst in instances
-            ]
-            _warm_up(instances)
-            if compiled:
-                pairs = zip(instances, twins, strict=True)
-                _warm_up([replace(inst, problem=tw) for inst, tw in pairs])
-            recs: dict[str, list[SolveRecord]] = {solver: [] for solver in ipopts}
-            sl: dict[int, SolveRecord] = {}
-            in_subset = set(sl_idx)
-            for k, inst in enumerate(instances):  # interleaved: all see the same machine load
-                recs["ipopt"].append(solve_ipopt(inst.problem, inst.p, inst.x0, inst.context))
-                if compiled:
-                    recs["ipopt+C"].append(solve_ipopt(twins[k], inst.p, inst.x0, inst.context))
-                if k in in_subset:
-                    sl[k] = solve_slsqp(inst.problem, inst.p, inst.x0, inst.context)
-            sl_list = [sl[k] for k in sl_idx]
-            for solver in ipopts:
-                per_instance.append(
-                    _records_json(theta, tname, solver, list(range(m)), recs[solver])
-                )
-            per_instance.append(_records_json(theta, tname, "slsqp", sl_idx, sl_list))
+            sl_idx = _slsqp_subset(m, slsqp_n, seed)
+            recs, sl_list = _solve_group(robot, terrain, instances, cache, compiled, ipopts, sl_idx)
+            per_instance += _group_json(theta, tname, ipopts, m, recs, sl_idx, sl_list)
             pool = pooled.setdefault(theta, {"slsqp": []})
-            rows = {}
-            for solver in ipopts:
-                common = [recs[solver][k] for k in sl_idx]
-                row = {"theta": theta, "terrain": tname, "solver": solver} | _stats(recs[solver])
-                row["speed_ratio"] = _speed_ratio(common, sl_list)
-                rows[solver] = row
-                pool.setdefault(solver, []).extend(recs[solver])
-                pool.setdefault(solver + "/common", []).extend(common)
-            rows["slsqp"] = {"theta": theta, "terrain": tname, "solver": "slsqp"} | _stats(sl_list)
-            rows["slsqp"]["speed_ratio"] = rows["ipopt"]["speed_ratio"]
+            rows = _group_rows(theta, tname, ipopts, recs, sl_idx, sl_list, pool)
             groups.extend(rows.values())
             pool["slsqp"] += sl_list
             if progress:
-                s_sl = rows["slsqp"]
-                ips = " | ".join(
-                    f"{solver} {rows[solver]['success_rate']:.0%} "
-                    f"{rows[solver]['time_ms_median']:.2f} ms"
-                    for solver in ipopts
-                )
-                print(
-                    f"[bench] {theta:6s} {tname:9s} n={m}: {ips} | slsqp (n={len(sl_list)}) "
-                    f"{s_sl.get('success_rate', 0):.0%} {s_sl.get('time_ms_median', 0):.1f} ms"
-                    f" | x{rows['ipopt']['speed_ratio']:.0f}"
-                    f"  [{time.perf_counter() - t_start:.0f} s]",
-                    file=sys.stderr,
-                    flush=True,
-                )
-    summary = []
-    for theta, pool in pooled.items():
-        for solver in ipopts:
-            row = {"theta": theta, "terrain": "all", "solver": solver} | _stats(pool[solver])
-            row["speed_ratio"] = _speed_ratio(pool[solver + "/common"], pool["slsqp"])
-            summary.append(row)
-        row = {"theta": theta, "terrain": "all", "solver": "slsqp"} | _stats(pool["slsqp"])
-        row["speed_ratio"] = _speed_ratio(pool["ipopt/common"], pool["slsqp"])  # as per terrain
-        summary.append(row)
+                _print_group(theta, tname, m, ipopts, rows, len(sl_list), t_start)
+    summary = _summary(pooled, ipopts)
     result = {
         "format": "stratawalk.bench.theta/1",
         "robot": robot_name,
         "terrains": list(terrains),
-        "config": {
-            "n_per_theta": n_per_theta,
-            "slsqp_n": slsqp_n,
-            "compiled": jit,
-            "seed": seed,
-            "feasibility_tol": FEASIBILITY_TOL,
-            "slsqp_options": {"maxiter": 200, "ftol": 1e-9, "jac": None},
-        },
+        "config": _config(n_per_theta, slsqp_n, jit, seed),
         "machine": machine | {"load_average_1_5_15_at_end": [round(v, 2) for v in os.getloadavg()]},
         "groups": groups,
         "summary": summary,
@@ -701,9 +631,117 @@ def run_theta_bench(
     }
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    write_atomic(out / "theta.json", lambda p: p.write_text(_dump_json(result)))
+    write_atomic(out / "theta.json", lambda p: p.write_text(dump_json(result)))
     write_atomic(out / "theta.md", lambda p: p.write_text(render_markdown(result)))
     return result
+
+
+def _config(n_per_theta: int, slsqp_n: int | None, jit: bool, seed: int) -> dict[str, Any]:
+    """The run's settings, as ``theta.json`` records them."""
+    return {
+        "n_per_theta": n_per_theta,
+        "slsqp_n": slsqp_n,
+        "compiled": jit,
+        "seed": seed,
+        "feasibility_tol": FEASIBILITY_TOL,
+        "slsqp_options": {"maxiter": 200, "ftol": 1e-9, "jac": None},
+    }
+
+
+def _group_json(theta, tname, ipopts, m: int, recs, sl_idx, sl_list) -> list[dict[str, Any]]:
+    """Per-instance columns of one (Theta, terrain): each IPOPT solver's, then SLSQP's."""
+    out = [_records_json(theta, tname, solver, list(range(m)), recs[solver]) for solver in ipopts]
+    out.append(_records_json(theta, tname, "slsqp", sl_idx, sl_list))
+    return out
+
+
+def _slsqp_subset(m: int, slsqp_n: int | None, seed: int) -> list[int]:
+    """The instances (of ``m``) that SLSQP solves: all, or a seeded subset of ``slsqp_n``."""
+    if slsqp_n is None or slsqp_n >= m:
+        return list(range(m))
+    pick = np.random.default_rng(seed + 7).choice(m, slsqp_n, replace=False)
+    return sorted(int(k) for k in pick)
+
+
+def _solve_group(
+    robot, terrain, instances: list[Instance], cache, compiled, ipopts, sl_idx: list[int]
+) -> tuple[dict[str, list[SolveRecord]], list[SolveRecord]]:
+    """({IPOPT solver: records of every instance}, SLSQP's records of ``sl_idx``).
+
+    Warmed up first (untimed); the solvers interleaved instance by instance, so that all
+    see the same machine load. ``compiled`` (a :class:`ProblemCache` of the NLPs compiled
+    to C) or None.
+    """
+    twins = [
+        compiled.twin(robot, terrain, inst.problem, cache) if compiled else None
+        for inst in instances
+    ]
+    _warm_up(instances)
+    if compiled:
+        pairs = zip(instances, twins, strict=True)
+        _warm_up([replace(inst, problem=tw) for inst, tw in pairs])
+    recs: dict[str, list[SolveRecord]] = {solver: [] for solver in ipopts}
+    sl: dict[int, SolveRecord] = {}
+    in_subset = set(sl_idx)
+    for k, inst in enumerate(instances):  # interleaved: all see the same machine load
+        recs["ipopt"].append(solve_ipopt(inst.problem, inst.p, inst.x0, inst.context))
+        if compiled:
+            recs["ipopt+C"].append(solve_ipopt(twins[k], inst.p, inst.x0, inst.context))
+        if k in in_subset:
+            sl[k] = solve_slsqp(inst.problem, inst.p, inst.x0, inst.context)
+    return recs, [sl[k] for k in sl_idx]
+
+
+def _group_rows(theta: str, tname: str, ipopts, recs, sl_idx, sl_list, pool) -> dict:
+    """{solver: row} of one (Theta, terrain); the IPOPT records pooled into ``pool``.
+
+    Each IPOPT row's speed ratio is taken on the instances SLSQP solved too; SLSQP's row
+    repeats IPOPT's.
+    """
+    rows = {}
+    for solver in ipopts:
+        common = [recs[solver][k] for k in sl_idx]
+        row = {"theta": theta, "terrain": tname, "solver": solver} | _stats(recs[solver])
+        row["speed_ratio"] = _speed_ratio(common, sl_list)
+        rows[solver] = row
+        pool.setdefault(solver, []).extend(recs[solver])
+        pool.setdefault(solver + "/common", []).extend(common)
+    rows["slsqp"] = {"theta": theta, "terrain": tname, "solver": "slsqp"} | _stats(sl_list)
+    rows["slsqp"]["speed_ratio"] = rows["ipopt"]["speed_ratio"]
+    return rows
+
+
+def _print_group(
+    theta: str, tname: str, m: int, ipopts, rows: dict, n_slsqp: int, t_start: float
+) -> None:
+    """One line on stderr for a (Theta, terrain): success rates and median times."""
+    s_sl = rows["slsqp"]
+    ips = " | ".join(
+        f"{solver} {rows[solver]['success_rate']:.0%} {rows[solver]['time_ms_median']:.2f} ms"
+        for solver in ipopts
+    )
+    print(
+        f"[bench] {theta:6s} {tname:9s} n={m}: {ips} | slsqp (n={n_slsqp}) "
+        f"{s_sl.get('success_rate', 0):.0%} {s_sl.get('time_ms_median', 0):.1f} ms"
+        f" | x{rows['ipopt']['speed_ratio']:.0f}"
+        f"  [{time.perf_counter() - t_start:.0f} s]",
+        file=sys.stderr,
+        flush=True,
+    )
+
+
+def _summary(pooled: dict, ipopts) -> list[dict[str, Any]]:
+    """Rows over all terrains: each Theta's pooled records, per solver."""
+    summary = []
+    for theta, pool in pooled.items():
+        for solver in ipopts:
+            row = {"theta": theta, "terrain": "all", "solver": solver} | _stats(pool[solver])
+            row["speed_ratio"] = _speed_ratio(pool[solver + "/common"], pool["slsqp"])
+            summary.append(row)
+        row = {"theta": theta, "terrain": "all", "solver": "slsqp"} | _stats(pool["slsqp"])
+        row["speed_ratio"] = _speed_ratio(pool["ipopt/common"], pool["slsqp"])  # as per terrain
+        summary.append(row)
+    return summary
 
 
 def _warm_up(instances: list[Instance]) -> None:
@@ -740,129 +778,6 @@ def _targets(summary: list[dict[str, Any]]) -> dict[str, Any]:
                     "met": bool(ip["success_rate"] >= sl["success_rate"]),
                 }
     return out
-
-
-def _jsonable(obj: Any) -> Any:
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.generic):
-        obj = obj.item()
-    if isinstance(obj, float) and not np.isfinite(obj):
-        return None
-    return obj
-
-
-def _row_md(r: dict[str, Any]) -> str:
-    if not r["instances"]:
-        return f"| {r['theta']} | {r['terrain']} | {r['solver']} | 0 | | | | | | |"
-    return (
-        f"| {r['theta']} | {r['terrain']} | {r['solver']} | {r['instances']} | "
-        f"{r['success_rate']:.1%} | {r['converged_rate']:.1%} | {r['time_ms_median']:.2f} | "
-        f"{r['time_ms_p95']:.2f} | {r['iterations_median']:.0f} | "
-        + (f"{r['speed_ratio']:.0f}x |" if r["solver"].startswith("ipopt") else " |")
-    )
-
-
-def render_markdown(result: dict[str, Any]) -> str:
-    """The markdown report of a :func:`run_theta_bench` result."""
-    m, c = result["machine"], result["config"]
-    head = (
-        "| Theta | terrain | solver | instances | success | converged | median [ms] "
-        "| p95 [ms] | median iters | speed ratio |\n"
-        "|---|---|---|---:|---:|---:|---:|---:|---:|---:|"
-    )
-    lines = [
-        f"# Theta benchmark: IPOPT (exact derivatives) vs SLSQP (finite differences), "
-        f"{result['robot']}",
-        "",
-        f"{m['date']}; {m['nproc']} cores ({m['cpu']}); python {m['python']}, casadi "
-        f"{m['casadi']}, scipy {m['scipy']}, numpy {m['numpy']}; commit {m['git_commit']}; "
-        f"seed {c['seed']}; total run time {result['total_time_s']:.0f} s. Load average (1, 5, "
-        f"15 min) at the start {m['load_average_1_5_15_at_start']}, at the end "
-        f"{m['load_average_1_5_15_at_end']}: other work on the machine slows both solvers; "
-        "they are run interleaved, instance by instance, so that both see the same load.",
-        "",
-        "## Per Theta (all terrains pooled)",
-        "",
-        head,
-        *[_row_md(r) for r in result["summary"]],
-        "",
-        "## Per Theta and terrain",
-        "",
-        head,
-        *[_row_md(r) for r in result["groups"]],
-        "",
-        "- **success**: the independent numpy/Pinocchio check (not the solver's own view) "
-        f"finds every constraint violated by at most {c['feasibility_tol']:g}; the same "
-        "judge for both solvers.",
-        "- **converged**: the solver reported success and its own constraints (the CasADi "
-        "g and the bounds) hold to 1e-6. Converged but not successful would mean the NLP "
-        "and the independent check disagree (a model mismatch, not a solver failure); "
-        "successful but not converged, that the solver stopped with an error status at a "
-        "point that happens to be feasible.",
-        "- **time**: IPOPT's is the solver call only (`solve_time_s`), SLSQP's the "
-        "`scipy.optimize.minimize` call, over all instances (failures included); one "
-        "untimed warm-up solve per problem object. Problem build time is separate (below).",
-        "- **speed ratio**: median SLSQP time / median IPOPT time on the same instances.",
-        "- **ipopt+C** (if present): the same NLPs with their functions compiled to C "
-        "(`ThetaOptions.jit`, cached per machine; compile time in the build times).",
-        f"- SLSQP: `jac=None` (its own forward differences for every gradient and Jacobian), "
-        f"maxiter {c['slsqp_options']['maxiter']}, ftol {c['slsqp_options']['ftol']:g}, same "
-        "objective, constraints, bounds, p and x0 as IPOPT."
-        + (
-            ""
-            if c["slsqp_n"] is None
-            else f" Run on a seeded subset of {c['slsqp_n']} instances per Theta and terrain."
-        ),
-        "",
-        "Largest independent violation among solutions reported feasible: "
-        + ", ".join(
-            f"{r['theta']} {r['solver']} {r.get('max_violation_of_feasible', 0.0):.1e}"
-            for r in result["summary"]
-        )
-        + ".",
-        "",
-        "## Targets (measured, not asserted)",
-        "",
-        *[f"- {k}: {_target_text(v)}" for k, v in result["targets"].items()],
-        "",
-        "## Failures by worst constraint group",
-        "",
-        *(
-            [
-                f"- {r['theta']} {r['terrain']} {r['solver']}: {r['failure_groups']}"
-                for r in result["groups"]
-                if r.get("failure_groups")
-            ]
-            or ["- none"]
-        ),
-        "",
-        "## Problem build times (once per terrain and support/leg, not in the solve times)",
-        "",
-        "| terrain | Theta | support / leg | build [ms] |\n|---|---|---|---:|",
-        *[
-            f"| {b['terrain']} | {b['theta']} | {b['key']} | {b['build_time_s'] * 1e3:.1f} |"
-            for b in result["build_times_s"]
-        ],
-        "",
-        "Instance generation (Theta4 placements, Theta2 moves for Theta3) [s]: "
-        + ", ".join(f"{k} {v:.1f}" for k, v in result["instance_generation_s"].items())
-        + ".",
-        "",
-    ]
-    return "\n".join(lines)
-
-
-def _target_text(v: dict[str, Any]) -> str:
-    if "target" in v:
-        return f"target {v['target']:g}, measured {v['measured']:.2f}: " + (
-            "met" if v["met"] else "NOT met"
-        )
-    return f"IPOPT {v['ipopt']:.1%} vs SLSQP {v['slsqp']:.1%}: " + (
-        "met" if v["met"] else "NOT met"
-    )
 
 
 # ---- command line --------------------------------------------------------------------------

@@ -48,6 +48,7 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
+from planner.body.polygon import convex_hull, polygon_signed_distance
 from planner.core.errors import InputError, PlannerError
 from planner.core.units import GRAVITY_M_S2
 
@@ -811,7 +812,7 @@ def _com_region(sc: _Scaled, com_z_m: float, mu: float, n_dirs: int, clip: float
             f"feasible_com_region: Clarabel failed on every direction (last status {status});"
             " check that feet_W, normals_W and gravity_W are physically sensible"
         )
-    hull = _convex_hull(np.array(points), tol=1e-7)
+    hull = convex_hull(np.array(points), tol=1e-7)
     return sc.centroid[:2] + sc.length * hull
 
 
@@ -859,48 +860,3 @@ def feasible_com_region(
         raise InputError(f"n_dirs: expected an integer >= 3, got {n_dirs!r}")
     sc = _scaled(feet_W, mass_kg, support, normals_W, gravity_W)
     return _com_region(sc, float(z), mu, int(n_dirs))
-
-
-def _convex_hull(points: _Array, tol: float) -> _Array:
-    """Counter-clockwise convex hull (monotone chain), dropping collinear points."""
-    pts = np.unique(np.round(points / tol) * tol, axis=0)
-    if len(pts) <= 2:
-        return pts
-
-    def cross(o: _Array, a: _Array, b: _Array) -> float:
-        return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
-
-    lower: list[_Array] = []
-    for p in pts:
-        while len(lower) >= 2 and cross(lower[-2], lower[-1], p) <= tol * tol:
-            lower.pop()
-        lower.append(p)
-    upper: list[_Array] = []
-    for p in pts[::-1]:
-        while len(upper) >= 2 and cross(upper[-2], upper[-1], p) <= tol * tol:
-            upper.pop()
-        upper.append(p)
-    return np.array(lower[:-1] + upper[:-1])
-
-
-def polygon_signed_distance(point_xy: ArrayLike, polygon_xy: ArrayLike) -> float:
-    """Signed distance [m] from a point to a convex polygon's boundary, positive inside.
-
-    ``polygon_xy`` (K, 2) is counter-clockwise; with fewer than 3 vertices (a segment or
-    a point) nothing is inside and the result is minus the distance to it.
-    """
-    p = np.asarray(point_xy, dtype=float).reshape(2)
-    poly = np.asarray(polygon_xy, dtype=float).reshape(-1, 2)
-    if len(poly) == 0:
-        return -math.inf
-    if len(poly) == 1:
-        return -float(np.linalg.norm(p - poly[0]))
-    dists, inside = [], len(poly) >= 3
-    for a, b in zip(poly, np.roll(poly, -1, axis=0), strict=True):
-        e = b - a
-        t = np.clip(np.dot(p - a, e) / max(np.dot(e, e), 1e-300), 0.0, 1.0)
-        dists.append(float(np.linalg.norm(p - (a + t * e))))
-        if e[0] * (p[1] - a[1]) - e[1] * (p[0] - a[0]) < 0.0:
-            inside = False
-    d = min(dists)
-    return d if inside or d == 0.0 else -d

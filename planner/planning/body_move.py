@@ -24,9 +24,9 @@ import numpy as np
 from planner.body.links import leg_links
 from planner.body.stability import support_margin_m
 from planner.body.state import State
+from planner.core.failures import FailureKind, kind_of
 from planner.motion.interpolate import interpolate_leaf
 from planner.motion.trajectory import Trajectory
-from planner.planning.targets import TWO_BEAT_MARGIN_M
 from planner.problems import Theta1
 
 __all__ = ["FAILED_MOVES_KEPT", "BodyMoves"]
@@ -74,6 +74,7 @@ class BodyMoves:
         if why:
             sol.feasible = False
             sol.diagnosis = f"body move onto three legs: {why}"
+            sol.failure = (kind_of(why),)
             return sol, []
         return self._ended(sol, path, support), path
 
@@ -108,14 +109,14 @@ class BodyMoves:
         """Whether the two-beat crawl keeps the body still before ``leg`` swings.
 
         With ``com_target`` "two_beat" on level ground, where the COM stands
-        ``TWO_BEAT_MARGIN_M`` inside the triangle of the other three feet already (the
+        ``two_beat_margin_m`` inside the triangle of the other three feet already (the
         second swing of a pair).
         """
         if self.settings.com_target != "two_beat" or not self.level_under(state):
             return False
         sup = [i for i in range(4) if i != leg]
         com = self.check.com_W(state)
-        return support_margin_m(state.feet_W[sup], com) >= TWO_BEAT_MARGIN_M
+        return support_margin_m(state.feet_W[sup], com) >= self.two_beat_margin_m
 
     def _held(self, state: State, support, rc, u_f, u_n, swing_target_W):
         """(solution, samples) of a body move that stays where it is, or None.
@@ -174,9 +175,10 @@ class BodyMoves:
                     self.robot, self.terrain, state, second.state, self.body_samples_at(state)
                 )
                 why2 = self.path_problem(path2)
-                if not why2 or ("path margin" in why2) == ("path margin" in why):
+                margin2 = kind_of(why2) is FailureKind.LINK_MARGIN
+                if not why2 or margin2 == (kind_of(why) is FailureKind.LINK_MARGIN):
                     sol, path, why = second, path2, why2
-        if "path margin" in why:  # a leg link sweeps past an edge between two clear poses
+        if kind_of(why) is FailureKind.LINK_MARGIN:  # a leg link sweeps past an edge
             via_path = self._via_path(state, sol.state, path, u_f, u_n)
             if via_path is not None:
                 why2 = self.path_problem(via_path)

@@ -67,6 +67,7 @@ class LocalPlan:
     distance_to_goal_m: float
     message: str
     stats: dict
+    interrupted: bool = False  # stopped by Ctrl-C or SIGTERM (the walk so far is kept)
 
 
 @dataclass
@@ -80,6 +81,7 @@ class Run:
     cycles: int = 0
     fails_in_row: int = 0  # failed cycles since the last step made
     last_failure: str = ""
+    halted: bool = False  # the source halted the run (an interrupt, a fall)
     best_dist_m: float = float("inf")  # nearest the COM came to the goal ...
     best_at: int = 0  # ... and in which cycle
     arrival_tried: object = -1  # the state (Source.stamp) of the last arrival attempt
@@ -419,6 +421,7 @@ class GaitDriver:
             if r.progress_first:
                 self._note_progress(dist)
             if why := source.halted():
+                run.halted = True
                 return why
             if self._arrival_due(dist):
                 moved = self.planner.arrival(state, run.goal, run.tau, dist <= r.goal_tol_m)
@@ -514,6 +517,7 @@ def plan_run(planner, start_xy, goal_xy, tau, progress, start_state) -> LocalPla
             message = planner._run(walk, run)
         except KeyboardInterrupt:
             message = f"interrupted after {walk.steps} steps; the plan so far is kept"
+            run.halted = True
         with interrupts.shielded():  # timed now (the overlaps), inside planning time
             walk.keyframes  # noqa: B018
     finally:
@@ -541,4 +545,5 @@ def plan_run(planner, start_xy, goal_xy, tau, progress, start_state) -> LocalPla
         distance_to_goal_m=dist,
         message=message,
         stats=stats,
+        interrupted=run.halted,
     )

@@ -391,33 +391,50 @@ def _evaluate(
             pb.start_xy, pb.goal_xy, tau=tau, progress=watch if math.isfinite(bound) else None
         )
     except _Rejected as exc:
-        metrics = dict(
-            _NO_WALK,
-            steps=seen["steps"],
-            planning_time_s=time.perf_counter() - t_start,
-            distance_to_goal_m=seen["distance_m"],
-            path_length_m=float(tau.length_m),
-        )
-        cost = seen["lower_bound"] + w.goal_per_m * seen["distance_m"] + w.not_reached
-        ev = Evaluation(
-            [float(v) for v in a_m], cost, validated=None, message=str(exc),
-            cost_terms={"rejected_lower_bound": seen["lower_bound"]}, generation=generation,
-            **metrics,
-        )  # fmt: skip
-        return ev, None
+        return _rejected(a_m, generation, str(exc), seen, tau, w, t_start), None
     except PlannerError as exc:  # e.g. no initial stance along this tau: as bad as no step
-        metrics = dict(_NO_WALK, distance_to_goal_m=d_start, path_length_m=float(tau.length_m))
-        cost, terms = trajectory_cost(pb.weights, **metrics)
-        ev = Evaluation(
-            [float(v) for v in a_m],
-            cost,
-            validated=None,
-            message=str(exc),
-            cost_terms=terms,
-            generation=generation,
-            **metrics,
-        )
-        return ev, None
+        return _unstarted(a_m, generation, str(exc), d_start, tau, pb.weights), None
+    return _walked(a_m, generation, pb, robot, terrain, local, tau, result)
+
+
+def _rejected(a_m, generation: int, message: str, seen: dict, tau, w, t_start: float):
+    """The Evaluation of a candidate stopped early: the lower bound of C where it stopped.
+
+    ``seen``: the distance left, steps and lower bound of C at the last step; plus the
+    distance term and the not-reached penalty (no plan kept).
+    """
+    metrics = dict(
+        _NO_WALK,
+        steps=seen["steps"],
+        planning_time_s=time.perf_counter() - t_start,
+        distance_to_goal_m=seen["distance_m"],
+        path_length_m=float(tau.length_m),
+    )
+    cost = seen["lower_bound"] + w.goal_per_m * seen["distance_m"] + w.not_reached
+    return Evaluation(
+        [float(v) for v in a_m], cost, validated=None, message=message,
+        cost_terms={"rejected_lower_bound": seen["lower_bound"]}, generation=generation,
+        **metrics,
+    )  # fmt: skip
+
+
+def _unstarted(a_m, generation: int, message: str, d_start: float, tau, weights):
+    """The Evaluation of a candidate the local planner could not start: C of no step."""
+    metrics = dict(_NO_WALK, distance_to_goal_m=d_start, path_length_m=float(tau.length_m))
+    cost, terms = trajectory_cost(weights, **metrics)
+    return Evaluation(
+        [float(v) for v in a_m],
+        cost,
+        validated=None,
+        message=message,
+        cost_terms=terms,
+        generation=generation,
+        **metrics,
+    )
+
+
+def _walked(a_m, generation: int, pb: _Problem, robot, terrain, local, tau, result):
+    """(Evaluation, plan with its caches dropped) of a candidate's walk, assembled and checked."""
     extra = {
         "planner": pb.planner,
         "tau": {"kind": tau.kind, "coefficients_m": list(a_m)},
@@ -476,13 +493,55 @@ def plan_global_walk(
     """
     import cma
 
+    gs = global_settings or GlobalSettings()
+    gs.check()
+    robot, robot_model, t, base, start, goal = _walk_inputs(
+        robot, terrain, start_xy, goal_xy, planner
+    )
+    spec = t.spec if mu is None else dict(t.spec, friction=float(mu))  # workers read the spec
+    t_begin = time.perf_counter()
+    tau0_xy, guide_note = None, "the straight line (guide off)"
+    if gs.guide:
+        tau0_xy, guide_note = guide_tau0_xy(robot_model, t, start, goal)
+    problem = _Problem(
+        robot, spec, base, planner, settings or LocalSettings(), start, goal, gs.weights, gs.seed,
+        tau0_xy,
+    )  # fmt: skip
+    workers = gs.workers or os.cpu_count() or 1
+    tau0, tau0_plan, tau0_checked = _evaluate_tau0(problem, gs.terms)
+    history: list[dict] = [_tau0_record(tau0, gs, t_begin, guide_note)]
+    best: tuple[Evaluation, object] | None = (tau0, tau0_plan) if tau0_plan else None
+    if progress is not None:
+        progress(history[-1])
+    stop = "tau0 reached the goal (no search)" if tau0.reached and not gs.refine_reached else ""
+    es = cma.CMAEvolutionStrategy(
+        np.zeros(gs.terms),
+        gs.sigma0_m,
+        {
+            "popsize": gs.popsize,
+            "seed": gs.seed,
+            "bounds": [-gs.bound_m, gs.bound_m],
+            "verbose": -9,
+            "maxiter": gs.max_generations,
+        },
+    )
+    best, n_eval, generation, stop = _search(
+        es, problem, gs, workers, t_begin, best, history, progress, stop
+    )
+    if best is None:
+        raise NoSolutionFound(f"global planning: no candidate tau got a plan ({tau0.message})")
+    elapsed = time.perf_counter() - t_begin
+    ev, plan = best
+    res = GlobalResult(ev, tau0, history, n_eval, generation, elapsed, stop)
+    return _checked_best(plan, res, tau0_checked, gs, guide_note, workers)
+
+
+def _walk_inputs(robot, terrain, start_xy, goal_xy, planner: str):
+    """(robot name or path, Robot, Terrain, its file's folder or None, start, goal), checked."""
     from planner.body.robot import load_robot
-    from planner.planfile.validate import check_plan
     from planner.planning.walk import PLANNERS, check_endpoints
     from planner.world.terrain import Terrain, load_terrain
 
-    gs = global_settings or GlobalSettings()
-    gs.check()
     if planner not in PLANNERS:
         raise InputError(f"planner: unknown '{planner}'; available: {', '.join(PLANNERS)}")
     if not isinstance(robot, str):
@@ -498,68 +557,54 @@ def plan_global_walk(
     lateral_coefficients(np.zeros(1), start, goal)  # start != goal
     robot_model = load_robot(robot)
     check_endpoints(robot_model, t, start, goal)
-    spec = t.spec if mu is None else dict(t.spec, friction=float(mu))  # workers read the spec
-    t_begin = time.perf_counter()
-    tau0_xy, guide_note = None, "the straight line (guide off)"
-    if gs.guide:
-        tau0_xy, guide_note = guide_tau0_xy(robot_model, t, start, goal)
-    problem = _Problem(
-        robot, spec, base, planner, settings or LocalSettings(), start, goal, gs.weights, gs.seed,
-        tau0_xy,
-    )  # fmt: skip
-    workers = gs.workers or os.cpu_count() or 1
+    return robot, robot_model, t, base, start, goal
+
+
+def _evaluate_tau0(problem: _Problem, terms: int):
+    """(Evaluation, plan, (plan, report) of its check) of tau0, evaluated in this process."""
     _load(problem)  # tau0 here: with the guide path it is often all there is to do
     try:
-        tau0, tau0_plan = _evaluate([0.0] * gs.terms, 0)
+        tau0, tau0_plan = _evaluate([0.0] * terms, 0)
         tau0_checked = _WORKER.get("report")
     finally:
         _WORKER.clear()
-    history: list[dict] = []
-    best: tuple[Evaluation, object] | None = (tau0, tau0_plan) if tau0_plan else None
-    n_eval, generation, stale, stop = 1, 0, 0, ""
-    history.append(
-        {
-            "generation": 0,
-            "evaluations": 1,
-            "elapsed_s": time.perf_counter() - t_begin,
-            "best_cost": tau0.cost,
-            "best_reached": bool(tau0.reached),
-            "best_coefficients_m": tau0.coefficients_m,
-            "generation_costs": [round(tau0.cost, 3)],
-            "generation_reached": int(tau0.reached),
-            "sigma": gs.sigma0_m,
-            "tau0_cost": tau0.cost,
-            "tau0_kind": guide_note,
-        }
-    )
-    if progress is not None:
-        progress(history[-1])
-    if tau0.reached and not gs.refine_reached:
-        stop = "tau0 reached the goal (no search)"
-    es = cma.CMAEvolutionStrategy(
-        np.zeros(gs.terms),
-        gs.sigma0_m,
-        {
-            "popsize": gs.popsize,
-            "seed": gs.seed,
-            "bounds": [-gs.bound_m, gs.bound_m],
-            "verbose": -9,
-            "maxiter": gs.max_generations,
-        },
-    )
+    return tau0, tau0_plan, tau0_checked
+
+
+def _tau0_record(tau0: Evaluation, gs: GlobalSettings, t_begin: float, guide_note: str) -> dict:
+    """The history record of generation 0: tau0 alone."""
+    return {
+        "generation": 0,
+        "evaluations": 1,
+        "elapsed_s": time.perf_counter() - t_begin,
+        "best_cost": tau0.cost,
+        "best_reached": bool(tau0.reached),
+        "best_coefficients_m": tau0.coefficients_m,
+        "generation_costs": [round(tau0.cost, 3)],
+        "generation_reached": int(tau0.reached),
+        "sigma": gs.sigma0_m,
+        "tau0_cost": tau0.cost,
+        "tau0_kind": guide_note,
+    }
+
+
+def _search(
+    es, problem, gs: GlobalSettings, workers: int, t_begin: float, best, history, progress, stop
+):
+    """CMA-ES generations in a process pool until ``stop`` says why (eq. 16).
+
+    Appends each generation's record to ``history`` (and gives it to ``progress``);
+    returns (best (Evaluation, plan) or None, evaluations, generations, stop reason).
+    Ctrl-C keeps the best plan so far (raises on without one).
+    """
+    n_eval, generation, stale = 1, 0, 0
     ctx = mp.get_context("spawn")  # no fork of a process holding CasADi/threads
     pool = None if stop else ProcessPoolExecutor(workers, ctx, _init_worker, (problem,))
     try:
         while not stop:
             generation += 1
             xs = es.ask()
-            cands = [[float(v) for v in x] for x in xs]
-            bound = best[0].cost if best is not None and best[0].reached else math.inf
-            n = len(cands)
-            deadline = time.time() + gs.time_budget_s - (time.perf_counter() - t_begin)
-            results = list(
-                pool.map(_evaluate, cands, [generation] * n, [bound] * n, [deadline] * n)
-            )
+            results = _generation(pool, xs, generation, best, gs, t_begin)
             n_eval += len(results)
             prev = best[0].cost if best is not None else math.inf
             for r in results:  # the cheapest candidate that has a plan
@@ -568,30 +613,11 @@ def plan_global_walk(
             es.tell(xs, [ev.cost for ev, _ in results])
             if best is not None and best[0].reached:
                 stale = stale + 1 if prev - best[0].cost <= gs.tol else 0
-            record = {
-                "generation": generation,
-                "evaluations": n_eval,
-                "elapsed_s": time.perf_counter() - t_begin,
-                "best_cost": best[0].cost if best else math.inf,
-                "best_reached": bool(best and best[0].reached),
-                "best_coefficients_m": best[0].coefficients_m if best else [],
-                "generation_costs": [round(ev.cost, 3) for ev, _ in results],
-                "generation_reached": sum(ev.reached for ev, _ in results),
-                "sigma": float(es.sigma),
-            }
+            record = _generation_record(generation, n_eval, t_begin, best, results, es)
             history.append(record)
             if progress is not None:
                 progress(record)
-            if best is not None and best[0].reached and (gs.patience == 0 or stale >= gs.patience):
-                stop = f"no improvement over {gs.tol:g} for {gs.patience} generations"
-                if gs.patience == 0:
-                    stop = "a candidate reached the goal (patience 0)"
-            elif generation >= gs.max_generations:
-                stop = f"max_generations ({gs.max_generations})"
-            elif time.perf_counter() - t_begin > gs.time_budget_s:
-                stop = f"time budget ({gs.time_budget_s:.0f} s)"
-            elif es.stop():
-                stop = "CMA-ES: " + ", ".join(es.stop())
+            stop = _stop_reason(gs, es, best, stale, generation, t_begin)
     except KeyboardInterrupt:
         stop = f"interrupted in generation {generation}; the best plan so far is kept"
         procs = list((getattr(pool, "_processes", None) or {}).values())  # before shutdown
@@ -604,11 +630,58 @@ def plan_global_walk(
     finally:
         if pool is not None:
             pool.shutdown(wait=True, cancel_futures=True)
-    if best is None:
-        raise NoSolutionFound(f"global planning: no candidate tau got a plan ({tau0.message})")
-    elapsed = time.perf_counter() - t_begin
-    ev, plan = best
-    res = GlobalResult(ev, tau0, history, n_eval, generation, elapsed, stop)
+    return best, n_eval, generation, stop
+
+
+def _generation(pool, xs, generation: int, best, gs: GlobalSettings, t_begin: float) -> list:
+    """A generation's candidates ``xs`` evaluated in the pool: [(Evaluation, plan or None)].
+
+    Bounded by the best reaching candidate's C (early rejection) and by what is left of
+    the search's time budget.
+    """
+    cands = [[float(v) for v in x] for x in xs]
+    bound = best[0].cost if best is not None and best[0].reached else math.inf
+    n = len(cands)
+    deadline = time.time() + gs.time_budget_s - (time.perf_counter() - t_begin)
+    return list(pool.map(_evaluate, cands, [generation] * n, [bound] * n, [deadline] * n))
+
+
+def _generation_record(generation: int, n_eval: int, t_begin: float, best, results, es) -> dict:
+    """The history record of a generation (the best so far and this generation's costs)."""
+    return {
+        "generation": generation,
+        "evaluations": n_eval,
+        "elapsed_s": time.perf_counter() - t_begin,
+        "best_cost": best[0].cost if best else math.inf,
+        "best_reached": bool(best and best[0].reached),
+        "best_coefficients_m": best[0].coefficients_m if best else [],
+        "generation_costs": [round(ev.cost, 3) for ev, _ in results],
+        "generation_reached": sum(ev.reached for ev, _ in results),
+        "sigma": float(es.sigma),
+    }
+
+
+def _stop_reason(gs: GlobalSettings, es, best, stale: int, generation: int, t_begin: float) -> str:
+    """Why the search stops after this generation, or "" to go on."""
+    if best is not None and best[0].reached and (gs.patience == 0 or stale >= gs.patience):
+        if gs.patience == 0:
+            return "a candidate reached the goal (patience 0)"
+        return f"no improvement over {gs.tol:g} for {gs.patience} generations"
+    if generation >= gs.max_generations:
+        return f"max_generations ({gs.max_generations})"
+    if time.perf_counter() - t_begin > gs.time_budget_s:
+        return f"time budget ({gs.time_budget_s:.0f} s)"
+    if es.stop():
+        return "CMA-ES: " + ", ".join(es.stop())
+    return ""
+
+
+def _checked_best(
+    plan, res: GlobalResult, tau0_checked, gs: GlobalSettings, guide_note: str, workers: int
+):
+    """(plan, report): the best plan checked (tau0's check reused), its stats completed."""
+    from planner.planfile.validate import check_plan
+
     if tau0_checked is not None and tau0_checked[0] is plan:  # checked here already
         report = tau0_checked[1]
     else:

@@ -101,7 +101,7 @@ class HardPlanner(SoftPlanner):
         first = super().plan(*args)
         budget = float(self.settings.time_budget_s)
         spent = float(first.stats["planning_time_s"])
-        if first.reached_goal or "interrupted" in first.message or spent >= budget:
+        if first.reached_goal or first.interrupted or spent >= budget:
             return first
         kept = self.settings
         self.settings = replace(kept, time_budget_s=budget - spent)

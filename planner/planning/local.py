@@ -18,7 +18,7 @@ import numpy as np
 
 from planner.body.kinematics import hip_point_B, kinematics_of
 from planner.body.robot import LEG_NAMES
-from planner.body.stability import BALANCE_MARGIN_M, nearest_inside_point_W, polygon_margin_m
+from planner.body.stability import nearest_inside_point_W, polygon_margin_m
 from planner.body.state import State
 from planner.body.torques import TorqueCheck
 from planner.motion.heuristics import nominal_height_m, reference_directions, support_body_target_W
@@ -185,7 +185,7 @@ class LocalPlanner(Targets, LevelGround, PathChecks, Landing, Swings, BodyMoves,
         Beyond the paper, whose walk ends after a step: a crawl's keyframes put the COM
         inside a three-foot triangle, and a robot whose stride is long next to
         ``goal_tol_m`` (b1, laikago) stepped in place around the goal without a keyframe
-        near it. Tried when the goal lies ``BALANCE_MARGIN_M`` inside the four feet's
+        near it. Tried when the goal lies ``balance_margin_m`` inside the four feet's
         support polygon: Theta2 on S0 with all four legs, its target the goal at the
         height of the footholds' plane (:func:`support_body_target_W`), the path checked
         as every body move's. The robot ends standing on four feet over the goal. With
@@ -197,9 +197,9 @@ class LocalPlanner(Targets, LevelGround, PathChecks, Landing, Swings, BodyMoves,
         the goal is outside the feet.
         """
         feet = np.asarray(state.feet_W, float).reshape(4, 3)
-        if polygon_margin_m(feet, goal_xy) < (0.0 if nearest else BALANCE_MARGIN_M):
+        if polygon_margin_m(feet, goal_xy) < (0.0 if nearest else self.balance_margin_m):
             return None  # the goal is ahead of the feet: steps, not a body move
-        goal = nearest_inside_point_W(feet, goal_xy, BALANCE_MARGIN_M)
+        goal = nearest_inside_point_W(feet, goal_xy, self.balance_margin_m)
         if goal is None:
             return None
         if np.linalg.norm(self.check.com_W(state)[:2] - goal) < 0.5 * ARRIVAL_M:

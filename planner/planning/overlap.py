@@ -10,7 +10,7 @@ swing, and it hides most of the swing's time in the body move's deceleration.
 :func:`overlap_step` lifts the leg at the earliest sample of the body path from which the
 rest of the path, now on three legs, passes every check of a planned path
 (:meth:`LocalPlanner.path_problem`: reach, body and link clearance, friction cones,
-joint torques), with the COM ``BALANCE_MARGIN_M`` (25 mm, a chosen pose's) inside the
+joint torques), with the COM the balance margin (``settings.theta``, a chosen pose's) inside the
 triangle and the three-leg stance holding on the servos (the sway stiffness floor of
 Theta2, :mod:`planner.body.stiffness`) wherever the body still moves. The leg never lifts at
 the body move's first sample: its load moves to the other feet over a four-feet interval.
@@ -38,9 +38,10 @@ from numpy.typing import NDArray
 
 from planner.body.contact import unique_contact_points
 from planner.body.rolling import leg_rotations_W, roll_stance_feet, sliding
-from planner.body.stability import BALANCE_MARGIN_M, support_margin_m
+from planner.body.stability import support_margin_m
 from planner.body.state import State
 from planner.body.stiffness import sway_stiffness_of
+from planner.core.failures import FailureKind, Problem, kind_of
 from planner.core.lie import interpolate_coords, pose_from_coords
 from planner.motion.interpolate import kept_knee_branches, swing_path
 from planner.planning.step import Step
@@ -133,16 +134,17 @@ def _lifted_copy(s: State, leg: int) -> State:
 def _earliest_lift(planner: OverlapPlanner, body: list[State], leg: int) -> int:
     """The first body sample from which the COM stays inside three feet with margin.
 
-    A cheap screen for :func:`overlap_step` (``BALANCE_MARGIN_M``, the swing leg at its
+    A cheap screen for :func:`overlap_step` (the balance margin, the swing leg at its
     stance joints), never the first sample: the load moves off the leg over a four-feet
     interval (:func:`planner.planfile.plan.loaded_feet`), and a touch-down is no lift-off.
     """
     sup = [i for i in range(4) if i != leg]
+    margin_m = planner.settings.theta.balance_margin_m
     n = len(body)
     first = n - 1
     for k in range(n - 1, 0, -1):
         s = body[k]
-        if support_margin_m(s.feet_W[sup], planner.check.com_W(s)) < BALANCE_MARGIN_M:
+        if support_margin_m(s.feet_W[sup], planner.check.com_W(s)) < margin_m:
             break
         first = k
     return first
@@ -163,7 +165,7 @@ def _moving(path: list[State]) -> range:
 def _tips(planner: OverlapPlanner, path: list[State], leg: int) -> str:
     """Why a sample of ``path`` with the body moving lacks a chosen pose's tip margin, or "".
 
-    While the body moves on three legs the COM keeps ``BALANCE_MARGIN_M`` (25 mm, Theta2's
+    While the body moves on three legs the COM keeps ``settings.theta.balance_margin_m`` (Theta2's
     at the pose where the paper lifts the leg; the swing's own samples keep 20 mm once the
     body rests). This is also the margin of a step corrected from a measured state (8.4).
     """
@@ -171,8 +173,9 @@ def _tips(planner: OverlapPlanner, path: list[State], leg: int) -> str:
     for k in _moving(path):
         s = path[k]
         tip = support_margin_m(s.feet_W[sup], planner.check.com_W(s))
-        if tip < BALANCE_MARGIN_M:
-            return f"the COM is {tip * 1000:.1f} mm inside the triangle at sample {k}"
+        if tip < planner.settings.theta.balance_margin_m:
+            why = f"the COM is {tip * 1000:.1f} mm inside the triangle at sample {k}"
+            return Problem(why, FailureKind.TIP)
     return ""
 
 
@@ -301,7 +304,8 @@ def _swings_with_body(planner: OverlapPlanner, path: list[State], leg: int) -> s
             s.base_position_W, s.base_rotation_W, s.joints_rad, sup, np.nan_to_num(tq.torques_nm)
         ).least
         if not have >= need:
-            return f"the stance sways at sample {k} ({have:.0f} N/m < {need:.0f} N/m)"
+            why = f"the stance sways at sample {k} ({have:.0f} N/m < {need:.0f} N/m)"
+            return Problem(why, FailureKind.SWAY)
     return ""
 
 
@@ -345,7 +349,7 @@ def overlap_step(planner: OverlapPlanner, step: Step) -> Overlap | None:
                 states = list(body[: lift + 1]) + list(path[1:])
                 times = np.concatenate([body_t[: lift + 1], body_t[lift] + swing_t[1:]])
                 return Overlap(lift, states, times)
-            if "balance" in why or "COM" in why:
+            if kind_of(why) in (FailureKind.BALANCE, FailureKind.TIP):
                 break  # a lower swing does not move the COM less
     return None
 

@@ -25,6 +25,7 @@ from planner.body.stability import PATH_BALANCE_MARGIN_M, support_margin_m
 from planner.body.state import State
 from planner.body.stiffness import sway_stiffness_of
 from planner.body.torques import COMMANDED_TORQUE_FRACTION
+from planner.core.failures import FailureKind, Problem
 from planner.core.lie import rotation_from_quat
 from planner.core.units import GRAVITY_M_S2
 from planner.motion.interpolate import BETWEEN_SAMPLES_RAD, BETWEEN_STEP_RAD, between_q
@@ -54,7 +55,7 @@ class PathChecks:
     """The checks of a sampled path (:meth:`path_problem`) and the keyframe it ends on."""
 
     def path_problem(self, path: list[State]) -> str:
-        """Why a sampled leaf path is not executable, or "": reach and balance per sample.
+        """Why a sampled leaf path is not executable (a typed ``Problem``), or "".
 
         Keyframes are feasible by construction, the samples between them are not: a leg
         can run out of reach mid-way, the body box can dip onto the sharp terrain (its
@@ -106,7 +107,8 @@ class PathChecks:
                     miss = err if k == 0 else min(miss, err)
                     continue
                 legs = ", ".join(LEG_NAMES[i] for i in s.info.get("unreachable_legs", []))
-                return f"sample {k} of the path leaves the reach of {legs or 'a leg'}"
+                why = f"sample {k} of the path leaves the reach of {legs or 'a leg'}"
+                return Problem(why, FailureKind.REACH)
             miss = 0.0
         return ""
 
@@ -117,9 +119,10 @@ class PathChecks:
         body_floor = max(min(BODY_CLEARANCE_M, float(gaps[0].min()) - START_SLACK_M), 0.0)
         for k, gap in enumerate(gaps):
             if float(gap.min()) < body_floor:
-                return (
+                return Problem(
                     f"the body passes {float(gap.min()) * 1000:.1f} mm above the terrain at "
-                    f"sample {k} of the path (less than {BODY_CLEARANCE_M * 1000:.0f} mm)"
+                    f"sample {k} of the path (less than {BODY_CLEARANCE_M * 1000:.0f} mm)",
+                    FailureKind.BODY_CLEARANCE,
                 )
         return ""
 
@@ -134,9 +137,10 @@ class PathChecks:
             allowed = np.maximum(self._foot_cut_m(start, stance), 0.0) + FOOT_CUT_TOL_M
             j = int(np.argmax(cut - allowed))
             if cut[j] > allowed[j]:
-                return (
+                return Problem(
                     f"the {LEG_NAMES[stance[j]]} foot rolls {cut[j] * 1000:.1f} mm into an edge "
-                    "of the terrain on the path"
+                    "of the terrain on the path",
+                    FailureKind.FOOT_ROLL,
                 )
         return ""
 
@@ -154,15 +158,16 @@ class PathChecks:
         for k, (short, bare) in enumerate(zip(shorts, bares, strict=True)):
             c = int(np.argmin(short - floor))
             if short[c] < floor[c]:
-                return (
+                return Problem(
                     f"the {links.describe(c)} comes {-short[c] * 1000:.1f} mm nearer the terrain "
-                    f"than its path margin at sample {k} of the path"
+                    f"than its path margin at sample {k} of the path",
+                    FailureKind.LINK_MARGIN,
                 ), bares
             if short.min() < 0.0:  # inside the margin, as the measured start: not touching
                 c = int(np.argmin(bare - bare_floor))
                 if bare[c] < bare_floor[c]:
                     why = f"the {links.describe(c)} touches the terrain at sample {k} of the path"
-                    return why, bares
+                    return Problem(why, FailureKind.LINK_CONTACT), bares
         return "", bares
 
     def _tip_problem(self, path: list[State], coms: list) -> str:
@@ -173,10 +178,11 @@ class PathChecks:
                 continue
             tip = support_margin_m(s.feet_W[sup], coms[k])
             if tip < PATH_BALANCE_MARGIN_M:
-                return (
+                return Problem(
                     f"the COM is {tip * 1000:.1f} mm inside the support triangle at sample "
                     f"{k} of the path (< {PATH_BALANCE_MARGIN_M * 1000:.0f} mm: a tip-over "
-                    "risk)"
+                    "risk)",
+                    FailureKind.TIP,
                 )
         return ""
 
@@ -202,9 +208,10 @@ class PathChecks:
             )
             s.info["margin_N"] = float(res.margin_N)  # the time law's floor (body_offsets_s)
             if not res.margin_N >= need:  # nan (solver failure) fails too
-                return (
+                return Problem(
                     f"balance lost at sample {k} of the path (friction-cone margin "
-                    f"{res.margin_N:.2f} N < {need:.2f} N): the COM leaves the support"
+                    f"{res.margin_N:.2f} N < {need:.2f} N): the COM leaves the support",
+                    FailureKind.BALANCE,
                 )
         return ""
 
@@ -218,10 +225,11 @@ class PathChecks:
                 ceiling = max(TORQUE_FRACTION, min(tq.ratio, MAX_START_TORQUE_FRACTION))
             if not tq.ratio <= ceiling:
                 j = max(tq.worst_joint, 0)
-                return (
+                return Problem(
                     f"joint {self.robot.joint_names[j]} needs {100 * tq.ratio:.0f} % of its "
                     f"effort limit at sample {k} of the path (more than "
-                    f"{100 * TORQUE_FRACTION:.0f} %)"
+                    f"{100 * TORQUE_FRACTION:.0f} %)",
+                    FailureKind.TORQUE,
                 )
             bound = self.settings.theta.sway_stiffness
             if k == len(path) - 1 and len(sup) == 3 and bound is not None:
@@ -234,10 +242,11 @@ class PathChecks:
                 ).least  # fmt: skip
                 need = sway.bound_n_per_m(bound)
                 if not have >= need:
-                    return (
+                    return Problem(
                         f"the three-leg stance at the end of the path sways: stiffness "
                         f"{have:.0f} N/m on the servos (< {need:.0f} N/m; -inf: a singular "
-                        "support leg)"
+                        "support leg)",
+                        FailureKind.SWAY,
                     )
         return ""
 
@@ -295,10 +304,11 @@ class PathChecks:
             for bare in measured[k]:
                 c = int(np.argmin(bare - floor))
                 if bare[c] < floor[c]:
-                    return (
+                    return Problem(
                         f"the {links.describe(c)} passes {-bare[c] * 1000:.1f} mm through the "
                         f"terrain between samples {k} and {k + 1} of the path (its joints move "
-                        f"{jump:.2f} rad there)"
+                        f"{jump:.2f} rad there)",
+                        FailureKind.LINK_SWEEP,
                     )
         return self._feet_between_samples(path, sweeps)
 
@@ -328,10 +338,11 @@ class PathChecks:
             allowed = np.maximum(ends, 0.0) + FOOT_CUT_TOL_M
             j = int(np.argmax(worst - allowed))
             if worst[j] > allowed[j]:
-                return (
+                return Problem(
                     f"the {LEG_NAMES[feet[j]]} foot passes {worst[j] * 1000:.1f} mm through the "
                     f"terrain between samples {k} and {k + 1} of the path (its joints move "
-                    f"{jump:.2f} rad there)"
+                    f"{jump:.2f} rad there)",
+                    FailureKind.FOOT_SWEEP,
                 )
         return ""
 

@@ -21,7 +21,8 @@ class Step:
 
     ``moved``: the state after the body move (None if it failed); ``end``: after the
     placement, back on S0 (None if the step failed). ``phase`` names the failed part
-    ("body_move" or "foot_placement"), ``diagnosis`` says why.
+    ("body_move" or "foot_placement"), ``diagnosis`` says why and ``failure`` holds the
+    kinds of what failed (:class:`planner.core.failures.FailureKind`), for the planner.
     """
 
     leg: int
@@ -36,3 +37,4 @@ class Step:
     # the swing overlapping the body move (planner.planning.overlap), set by step_samples
     overlap: object = field(default=None, repr=False)
     timed: bool = field(default=False, repr=False)
+    failure: tuple = ()  # FailureKind values of the failed part

@@ -20,8 +20,9 @@ from __future__ import annotations
 import numpy as np
 
 from planner.body.robot import LEG_NAMES
-from planner.body.stability import BALANCE_MARGIN_M, triangle_inradius_m
+from planner.body.stability import triangle_inradius_m
 from planner.body.state import State
+from planner.core.failures import FailureKind
 from planner.motion.trajectory import Trajectory
 from planner.planning.step import Step
 
@@ -118,6 +119,7 @@ class Stepping:
                 sol2, body_path = self._body_move_once(state, leg, tau, None, shrink, hint)
             if not sol2.feasible:
                 step = Step(leg, False, state, None, None, [], [], "body_move", sol2.diagnosis)
+                step.failure = sol2.failure
             else:
                 sol3, swing_path = self.swing(
                     sol2.state, leg, tau, step_m, target, knee if k == 0 else None
@@ -148,7 +150,7 @@ class Stepping:
                         sol3.diagnosis,
                     )  # fmt: skip
             first = first or step
-            if "balance_margin" in step.diagnosis and step.phase == "body_move" and k == 0:
+            if FailureKind.BALANCE_MARGIN in step.failure and step.phase == "body_move" and k == 0:
                 break  # the COM cannot shift onto the other three legs: no foothold helps
             if not try_others:
                 break
@@ -184,11 +186,11 @@ class Stepping:
         """Whether ``leg`` on ``foothold_W`` leaves the gait's next leg no stance to swing from.
 
         The next leg of ``settings.gait`` swings on the other three feet; when their
-        triangle's inradius is below ``BALANCE_MARGIN_M`` no COM keeps Theta2's balance
+        triangle's inradius is below the balance margin no COM keeps Theta2's balance
         margin on it (e.g. both front feet on one stepping stone: the hind legs can no
         longer step). Beyond the paper: a one-step look-ahead of the foothold choice.
         """
         nxt = self._next_leg(leg)
         feet = np.array(state.feet_W, float).reshape(4, 3)
         feet[leg] = np.asarray(foothold_W, float).reshape(3)
-        return triangle_inradius_m(np.delete(feet, nxt, axis=0)) < BALANCE_MARGIN_M
+        return triangle_inradius_m(np.delete(feet, nxt, axis=0)) < self.balance_margin_m

@@ -21,6 +21,7 @@ import numpy as np
 
 from planner.body.robot import LEG_NAMES
 from planner.body.state import State
+from planner.core.failures import FailureKind, kind_of
 from planner.motion.heuristics import EDGE_MARGIN_M, foothold_hazard, lambda_t, reference_directions
 from planner.motion.interpolate import interpolate_swing
 from planner.motion.leg_swing import joint_space_swing
@@ -115,15 +116,17 @@ class Swings:
             if not why:
                 sol.state = self.path_end(path, tuple(range(4)))
                 return sol, path
-            if "balance" in why:  # a lower swing does not move the COM less
+            if kind_of(why) is FailureKind.BALANCE:  # a lower swing does not move the COM less
                 break
-        if "balance" not in why:  # the foot's path is clear but a link is not: fold the leg
+        if kind_of(why) is not FailureKind.BALANCE:  # the foot's path is clear, a link not:
+            # fold the leg
             path, why2 = self._joint_space_swing(lifted, touch, leg)
             if not why2:
                 sol.state = self.path_end(path, tuple(range(4)))
                 return sol, path
         sol.feasible = False
         sol.diagnosis = f"swing of {LEG_NAMES[leg]}: {why}"
+        sol.failure = (kind_of(why),)
         return sol, []
 
     def _joint_space_swing(self, lifted: State, touch: State, leg: int):

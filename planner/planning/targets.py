@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from planner.body.stability import BALANCE_MARGIN_M
 from planner.body.state import State
 from planner.motion.footholds import best_and_shortest, foothold_candidates
 from planner.motion.gait_queue import CRAWL
@@ -40,7 +39,7 @@ __all__ = [
     "CANDIDATE_LATERAL_M",
     "CANDIDATE_POOL",
     "OTHER_FOOTHOLDS",
-    "TWO_BEAT_MARGIN_M",
+    "TWO_BEAT_SPARE_M",
     "Targets",
 ]
 
@@ -52,13 +51,23 @@ CANDIDATE_LATERAL_M = 0.05  # other footholds within this of the failed one side
 # three feet up a 10 cm step the footholds' plane put the body 4 cm too high for the fourth
 ALWAYS_REACH_FRACTION = 0.95
 # com_target "two_beat": the COM stays put, or moves to the deepest point of two supports,
-# where it is this far inside (Theta2's own margin, BALANCE_MARGIN_M, and 5 mm to spare for
-# the pose Theta2 finds near the target)
-TWO_BEAT_MARGIN_M = BALANCE_MARGIN_M + 0.005
+# where it is Theta2's own margin (settings.theta.balance_margin_m) and this much more
+# inside, to spare for the pose Theta2 finds near the target [m]
+TWO_BEAT_SPARE_M = 0.005
 
 
 class Targets:
     """The body target, the body's directions, the footholds and the stride of a step."""
+
+    @property
+    def balance_margin_m(self) -> float:
+        """The COM's margin inside a three-leg support [m]: the one setting, Theta2's."""
+        return self.settings.theta.balance_margin_m
+
+    @property
+    def two_beat_margin_m(self) -> float:
+        """Where the two-beat crawl holds or puts the COM inside two supports [m]."""
+        return self.balance_margin_m + TWO_BEAT_SPARE_M
 
     def stride_m(self) -> float:
         """Stride of Lambda_t [m]: ``settings.step_m`` or 0.35 x the shortest leg reach."""
@@ -175,7 +184,7 @@ class Targets:
         if self.settings.com_target == "two_beat" and self.level_under(state):
             centre = two_beat_xy_W(
                 state, leg, self._next_leg(leg), swing_target_W, self.check.com_W(state),
-                TWO_BEAT_MARGIN_M,
+                self.two_beat_margin_m,
             )  # fmt: skip
         rc = lambda_c(
             self.robot, self.terrain, state, leg, self.com_height_m(), k, feet, heading, centre

@@ -35,6 +35,7 @@ import pinocchio as pin
 from planner.body import statics
 from planner.body.kinematics import kinematics_of
 from planner.body.state import State
+from planner.core.failures import FailureKind, kinds_of_groups
 from planner.core.lie import coords_from_pose, pose_from_coords, rotation_from_vector_ca
 from planner.core.units import GRAVITY_M_S2
 from planner.problems.options import ThetaOptions
@@ -71,6 +72,7 @@ class ThetaSolution:
     build_time_s: float
     diagnosis: str = ""
     violations: dict[str, float] = field(default_factory=dict)
+    failure: tuple[FailureKind, ...] = ()  # the kinds of the violated groups named
     x: np.ndarray | None = field(default=None, repr=False)
     p: np.ndarray | None = field(default=None, repr=False)  # parameters of the last solve
 
@@ -429,9 +431,10 @@ class ThetaProblem:
         feasible = bool(np.isfinite(worst) and worst <= FEASIBILITY_TOL)
         terms = np.array(self._terms_fun(x, p)).ravel()
         term_dict = {name: float(v) for (name, _, _), v in zip(self._terms, terms, strict=True)}
-        diagnosis = ""
+        diagnosis, failure = "", ()
         if not feasible:
             diagnosis = self._diagnose(status, violations)
+            failure = kinds_of_groups(self.violated_groups(violations))
         return ThetaSolution(
             problem=self.name,
             status=status,
@@ -444,6 +447,7 @@ class ThetaProblem:
             build_time_s=self.build_time_s,
             diagnosis=diagnosis,
             violations=violations,
+            failure=failure,
             x=x,
             p=p,
         )
@@ -523,8 +527,8 @@ class ThetaProblem:
             out[name] = float(max(np.max(v, initial=0.0), 0.0))
         return out
 
-    def _diagnose(self, status: str, violations: dict[str, float]) -> str:
-        """Name the violated groups, most severe first (each relative to its unit scale)."""
+    def violated_groups(self, violations: dict[str, float]) -> list[str]:
+        """The groups violated past ``FEASIBILITY_TOL``, most severe first (relative to scale)."""
         mg = self.robot.total_mass_kg * GRAVITY_M_S2
         scale = {
             "forces": 0.01 * mg,
@@ -535,9 +539,14 @@ class ThetaProblem:
             "sway": 0.01,
         }
         bad = {k: v for k, v in violations.items() if not v <= FEASIBILITY_TOL}
+        return sorted(bad, key=lambda k: -bad[k] / scale.get(k, 1e-3))
+
+    def _diagnose(self, status: str, violations: dict[str, float]) -> str:
+        """Name the violated groups, most severe first (each relative to its unit scale)."""
+        bad = {k: v for k, v in violations.items() if not v <= FEASIBILITY_TOL}
         if not bad:
             return f"{self.name}: IPOPT status {status}"
-        order = sorted(bad, key=lambda k: -bad[k] / scale.get(k, 1e-3))
+        order = self.violated_groups(violations)
         unit = {
             "forces": "N",
             "joint_limits": "rad",

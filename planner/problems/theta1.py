@@ -26,6 +26,7 @@ import numpy as np
 from planner.body import statics
 from planner.body.stability import support_margin_m
 from planner.body.state import State
+from planner.core.failures import FailureKind
 from planner.core.units import GRAVITY_M_S2
 from planner.problems.base import ThetaSolution
 from planner.problems.theta2 import Theta2
@@ -84,6 +85,7 @@ class Theta1(Theta2):
                     build_time_s=self.build_time_s,
                     diagnosis=f"Theta1: COM target r_c* cannot be held: {why}",
                     violations={"forces": float("inf")},
+                    failure=(FailureKind.FORCES,),
                 )
         t0 = time.perf_counter()
         sol = super().solve(start, rc_star_W, u_f, u_n, swing_target_W)

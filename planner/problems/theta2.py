@@ -45,6 +45,7 @@ from planner.body.kinematics import hip_point_B
 from planner.body.state import S0, State
 from planner.body.stiffness import joint_sway_matrix_ca, sway_stiffness_of
 from planner.body.torques import TorqueCheck, joint_efforts_nm, least_squares_ratios_ca
+from planner.core.failures import FailureKind, kinds_of_groups
 from planner.core.lie import coords_from_pose
 from planner.core.units import GRAVITY_M_S2
 from planner.motion.heuristics import frame_from_directions
@@ -139,16 +140,7 @@ class Theta2(ThetaProblem):
 
         R = self.rotation(phi)
         self.constrain("contact", ca.vec(self.kin.feet_W_ca(pos, R, th)) - centres)
-        # reach margin: no stance leg ends stretched to its reach (a singular leg cannot
-        # follow the few millimetres its rolling foot moves, nor correct a tracking error)
-        hips_B = [hip_point_B(lg) for lg in r.legs]
-        centre_cols = ca.reshape(centres, 3, 4)
-        stretch = [
-            ca.sumsqr(ca.mtimes(R, ca.DM(hips_B[i])) + pos - centre_cols[:, i])
-            - (STANCE_REACH_FRACTION * float(r.reach_m[i])) ** 2
-            for i in range(4)
-        ]
-        self.constrain("reach", ca.vertcat(*stretch), -np.inf, 0.0)
+        self._constrain_reach(pos, R, centres)
         self.constrain_body_pose(pos, R, phi, s1, s2, u_f, u_n)
         self.constrain_leg_links(pos, R, {i: th[3 * i : 3 * i + 3] for i in range(4)})
         com = com_W_ca(self, pos, R, th)
@@ -159,6 +151,44 @@ class Theta2(ThetaProblem):
             self.constrain("com_height", com[2] - rc[2], -band, band)
         elif self.fix_com:
             self.constrain("com", com - rc)
+        th_land = self._constrain_swing(pos, R)
+        if o.forces and (free_height or not self.fix_com):
+            self._constrain_forces(pos, R, th, feet, normals, centres, com, th_land)
+        d_theta = th - ca.DM(r.theta_nor.ravel())
+        self.maximise_log("sigma1", o.weights[0], s1)
+        self.maximise_log("sigma2", o.weights[1], s2)
+        self.maximise_log("sigma3", o.weights[2], sigma3_ca(d_theta, o))
+        if free_height:
+            self.maximise_log("sigma4", o.weights[3], gaussian_ca(com[2] - rc[2], o.com_length_m))
+        elif not self.fix_com:
+            self.maximise_log("sigma4", o.weights[3], gaussian_ca(com - rc, o.com_length_m))
+
+    def _constrain_reach(self, pos, R, centres) -> None:
+        """Reach margin: no stance leg ends stretched to its reach.
+
+        A singular leg cannot follow the few millimetres its rolling foot moves, nor
+        correct a tracking error: each hip stays within ``STANCE_REACH_FRACTION`` of its
+        leg's reach from its foot's sphere centre.
+        """
+        r = self.robot
+        hips_B = [hip_point_B(lg) for lg in r.legs]
+        centre_cols = ca.reshape(centres, 3, 4)
+        stretch = [
+            ca.sumsqr(ca.mtimes(R, ca.DM(hips_B[i])) + pos - centre_cols[:, i])
+            - (STANCE_REACH_FRACTION * float(r.reach_m[i])) ** 2
+            for i in range(4)
+        ]
+        self.constrain("reach", ca.vertcat(*stretch), -np.inf, 0.0)
+
+    def _constrain_swing(self, pos, R):
+        """On three feet: the swing leg's hip within reach of its target (swing-ready).
+
+        Landing-ready too (``landing``): the swing leg's joints at touch-down (variables
+        ``theta_land``, returned; None without ``landing``) reach the target's sphere
+        centre from this body pose, thigh and shank clear of the terrain.
+        """
+        o, r = self.options, self.robot
+        th_land = None
         if len(self.support) == 3:
             (leg,) = set(range(4)) - set(self.support)
             hip_W = ca.mtimes(R, ca.DM(hip_point_B(r.legs[leg]))) + pos
@@ -176,65 +206,66 @@ class Theta2(ThetaProblem):
             self.maximise_log(
                 "sigma_land", LANDING_WEIGHT, sigma3_ca(th_land - ca.DM(r.theta_nor[leg]), o)
             )
-        if o.forces and (free_height or not self.fix_com):
-            feet_cols = ca.reshape(feet, 3, 4)
-            normal_cols = ca.reshape(normals, 3, 4)
-            F = self._eq5_forces_ca(feet_cols, com)
-            ns = [normal_cols[:, i] for i in range(4)]
-            fmin = o.min_normal_force_frac * r.total_mass_kg * GRAVITY_M_S2
+        return th_land
+
+    def _constrain_forces(self, pos, R, th, feet, normals, centres, com, th_land) -> None:
+        """The support's eq.-5 forces inside the friction cones, and the COM's balance.
+
+        Rows (d) and (e) of section 7.3 on the forces of eq. 5 with a least normal force,
+        sigma5 (how far inside the cones they are) as a variable and an objective term;
+        on three feet the COM inside the support triangle by ``balance_margin_m``, the
+        joint torques and the sway stiffness when asked, and with ``landing`` the same
+        forces and balance with the swing leg at touch-down (``th_land``).
+        """
+        o, r = self.options, self.robot
+        feet_cols = ca.reshape(feet, 3, 4)
+        normal_cols = ca.reshape(normals, 3, 4)
+        F = self._eq5_forces_ca(feet_cols, com)
+        ns = [normal_cols[:, i] for i in range(4)]
+        fmin = o.min_normal_force_frac * r.total_mass_kg * GRAVITY_M_S2
+        cone = statics.friction_cone_residuals_ca(
+            F, self.mu, self.support, ns, eps_N=o.friction_eps_N
+        )
+        self.constrain("forces_normal", cone[0::2], fmin, np.inf)
+        self.constrain("forces_cone", cone[1::2], 0.0, np.inf)
+        s5 = self.var("s5", 1, o.sigma_floor)
+        ratio = ca.vertcat(
+            *[
+                ca.dot(F[i], ns[i]) / ca.sqrt(ca.dot(F[i], F[i]) + o.friction_eps_N**2)
+                for i in self.support
+            ]
+        )
+        self.constrain("sigma5", ratio - s5, 0.0, np.inf)
+        if len(self.support) == 3:  # the COM inside the support triangle with margin
+            tri = [feet_cols[:, i] for i in self.support]
+            self.constrain(
+                "balance_margin",
+                stability.support_margins_ca(tri, com),
+                o.balance_margin_m,
+                np.inf,
+            )
+        self.maximise_log("sigma5", o.weights[4], s5)
+        if len(self.support) == 3 and o.torque_fraction is not None and self.torque_rows:
+            self._constrain_torques(R, th, feet_cols, normal_cols, com)
+        if len(self.support) == 3 and o.sway_stiffness is not None and self.sway_rows:
+            self._constrain_sway(pos, R, th, ca.reshape(centres, 3, 4))
+        if self.landing:
+            # balance holds with the swing leg's mass at touch-down too (the COM set of
+            # feasible eq. 5 forces is convex: the swing's COM between the two holds)
+            (leg,) = set(range(4)) - set(self.support)
+            th_all = ca.vertcat(*[th_land if i == leg else th[3 * i : 3 * i + 3] for i in range(4)])
+            F_land = self._eq5_forces_ca(feet_cols, com_W_ca(self, pos, R, th_all))
             cone = statics.friction_cone_residuals_ca(
-                F, self.mu, self.support, ns, eps_N=o.friction_eps_N
+                F_land, self.mu, self.support, ns, eps_N=o.friction_eps_N
             )
-            self.constrain("forces_normal", cone[0::2], fmin, np.inf)
-            self.constrain("forces_cone", cone[1::2], 0.0, np.inf)
-            s5 = self.var("s5", 1, o.sigma_floor)
-            ratio = ca.vertcat(
-                *[
-                    ca.dot(F[i], ns[i]) / ca.sqrt(ca.dot(F[i], F[i]) + o.friction_eps_N**2)
-                    for i in self.support
-                ]
+            self.constrain("forces_landing_normal", cone[0::2], fmin, np.inf)
+            self.constrain("forces_landing_cone", cone[1::2], 0.0, np.inf)
+            self.constrain(
+                "balance_margin_landing",
+                stability.support_margins_ca(tri, com_W_ca(self, pos, R, th_all)),
+                stability.PATH_BALANCE_MARGIN_M,
+                np.inf,
             )
-            self.constrain("sigma5", ratio - s5, 0.0, np.inf)
-            if len(self.support) == 3:  # the COM inside the support triangle with margin
-                tri = [feet_cols[:, i] for i in self.support]
-                self.constrain(
-                    "balance_margin",
-                    stability.support_margins_ca(tri, com),
-                    o.balance_margin_m,
-                    np.inf,
-                )
-            self.maximise_log("sigma5", o.weights[4], s5)
-            if len(self.support) == 3 and o.torque_fraction is not None and self.torque_rows:
-                self._constrain_torques(R, th, feet_cols, normal_cols, com)
-            if len(self.support) == 3 and o.sway_stiffness is not None and self.sway_rows:
-                self._constrain_sway(pos, R, th, ca.reshape(centres, 3, 4))
-            if self.landing:
-                # balance holds with the swing leg's mass at touch-down too (the COM set of
-                # feasible eq. 5 forces is convex: the swing's COM between the two holds)
-                (leg,) = set(range(4)) - set(self.support)
-                th_all = ca.vertcat(
-                    *[th_land if i == leg else th[3 * i : 3 * i + 3] for i in range(4)]
-                )
-                F_land = self._eq5_forces_ca(feet_cols, com_W_ca(self, pos, R, th_all))
-                cone = statics.friction_cone_residuals_ca(
-                    F_land, self.mu, self.support, ns, eps_N=o.friction_eps_N
-                )
-                self.constrain("forces_landing_normal", cone[0::2], fmin, np.inf)
-                self.constrain("forces_landing_cone", cone[1::2], 0.0, np.inf)
-                self.constrain(
-                    "balance_margin_landing",
-                    stability.support_margins_ca(tri, com_W_ca(self, pos, R, th_all)),
-                    stability.PATH_BALANCE_MARGIN_M,
-                    np.inf,
-                )
-        d_theta = th - ca.DM(r.theta_nor.ravel())
-        self.maximise_log("sigma1", o.weights[0], s1)
-        self.maximise_log("sigma2", o.weights[1], s2)
-        self.maximise_log("sigma3", o.weights[2], sigma3_ca(d_theta, o))
-        if free_height:
-            self.maximise_log("sigma4", o.weights[3], gaussian_ca(com[2] - rc[2], o.com_length_m))
-        elif not self.fix_com:
-            self.maximise_log("sigma4", o.weights[3], gaussian_ca(com - rc, o.com_length_m))
 
     def _constrain_torques(self, R, th, feet_cols, normal_cols, com) -> None:
         """Support joints within ``torque_fraction`` of their effort (commanded forces).
@@ -534,7 +565,10 @@ class Theta2(ThetaProblem):
         )
         # the one shortfall no pose removes (the start's own violations are moot)
         violations = {"balance_margin": margin - room_m}
-        return self._unsolved(x, p, state, "support_too_small", False, diagnosis, violations)
+        return self._unsolved(
+            x, p, state, "support_too_small", False, diagnosis, violations,
+            failure=(FailureKind.BALANCE_MARGIN,),
+        )  # fmt: skip
 
     def hold(self, start: State, rc_star_W, u_f, u_n, swing_target_W=None) -> ThetaSolution:
         """Theta2's constraints at ``start`` itself: the body stays where it stands.
@@ -555,8 +589,15 @@ class Theta2(ThetaProblem):
         diagnosis = "" if feasible else self._diagnose("held", violations)
         return self._unsolved(x, p, state, "held", feasible, diagnosis, violations)
 
-    def _unsolved(self, x, p, state, status, feasible, diagnosis, violations) -> ThetaSolution:
-        """The solution of the start itself (:meth:`_at_start`), with no IPOPT solve."""
+    def _unsolved(
+        self, x, p, state, status, feasible, diagnosis, violations, failure=None
+    ) -> ThetaSolution:
+        """The solution of the start itself (:meth:`_at_start`), with no IPOPT solve.
+
+        ``failure``: the kinds of what failed (default: those of the violated groups).
+        """
+        if failure is None:
+            failure = () if feasible else kinds_of_groups(self.violated_groups(violations))
         return ThetaSolution(
             problem=self.name,
             status=status,
@@ -569,6 +610,7 @@ class Theta2(ThetaProblem):
             build_time_s=self.build_time_s,
             diagnosis=diagnosis,
             violations=violations,
+            failure=failure,
             x=x,
             p=p,
         )
