@@ -200,18 +200,19 @@ def _correction_time_s(robot, pos_err: _Array, rot_err: _Array, local=None) -> f
 
     The base's error, and its rotation's at the hips (the lever of the farthest hip), moved
     from rest to rest under the planner's body-move time law (``body_speed_m_s``,
-    ``body_accel_m_s2`` of ``local``'s settings; LittleDog's defaults without it). The plan's
+    ``body_accel_m_s2`` of ``local``'s settings; the defaults for ``robot`` without it). The plan's
     four-feet phase is timed for the plan's own move, 0.2 s for millimetres: barrier75mm's
     body, 2.8 cm off the plan after steps planned anew, was pulled back in those 0.2 s and
     the robot tipped as the next foot lifted, and fell.
     """
     from planner.body.kinematics import hip_point_B
-    from planner.motion.time_law import rest_to_rest_durations_s
-    from planner.planning.local import BODY_ACCEL_M_S2, BODY_SPEED_M_S
+    from planner.motion.time_law import rest_to_rest_durations_s, timed_settings
+    from planner.problems.options import LocalSettings
 
-    st = getattr(local, "settings", None)
-    speed = getattr(st, "body_speed_m_s", None) or BODY_SPEED_M_S
-    accel = getattr(st, "body_accel_m_s2", None) or BODY_ACCEL_M_S2
+    # the planner's settings, resolved for the robot once (LocalPlanner); else the defaults
+    # resolved the same way
+    st = local.settings if local is not None else timed_settings(LocalSettings(), robot)
+    speed, accel = st.body_speed_m_s, st.body_accel_m_s2
     lever = max(float(np.linalg.norm(hip_point_B(leg))) for leg in robot.legs)
     err = max(float(np.linalg.norm(pos_err)), lever * float(np.linalg.norm(rot_err)))
     return float(rest_to_rest_durations_s(np.array([err]), np.array([speed]), accel)[0])
