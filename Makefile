@@ -40,7 +40,7 @@ bench: $(STAMP)
 	$(VENV)/bin/stratawalk bench speed
 	$(VENV)/bin/stratawalk bench robots
 
-# every command fed generated bad input (hypothesis), 20x the cases of make test (~6,600,
+# every command fed generated bad input (hypothesis), 20x the cases of make test (~7,400,
 # a fresh seed each run): never a traceback, never a hang; ~6 min on 2 cores
 fuzz: $(STAMP)
 	STRATAWALK_FUZZ_SCALE=20 $(PY) -m pytest -q tests/test_fuzz.py --hypothesis-show-statistics

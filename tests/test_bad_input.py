@@ -369,3 +369,270 @@ def test_sigterm_to_bench_physics_stops_its_workers(tmp_path):
     assert proc.returncode == 143, err
     assert "Traceback" not in err, err
     assert (out / "physics.md").exists()
+
+
+# ------------------------------------------------------------------------------ output locations
+def _bad_location(where: str, tmp_path: Path) -> str:
+    """A folder no file can be written into: under /proc, under /sys (where probing it is
+    refused even to root), or a file in the way."""
+    if where == "file":
+        (tmp_path / "in_the_way").write_text("keep me")
+        return str(tmp_path / "in_the_way" / "sub")
+    if not Path(f"/{where}").is_dir():
+        pytest.skip(f"no /{where} here")
+    return f"/{where}/stratawalk-test"
+
+
+@pytest.mark.parametrize("where", ["proc", "sys", "file"])
+@pytest.mark.parametrize(
+    "args, option",
+    [
+        (["plan", "--terrain", "flat", "--goal", "2.2,0", "--out", "{bad}/plan.json"], "--out"),
+        (["export", "{plan}", "--out", "{bad}/t.csv"], "--out"),
+        (["export", "{plan}", "--out", "{bad}/t.npz"], "--out"),
+        (["simulate", "{plan}", "--out", "{bad}/s.json"], "--out"),
+        (["replay", "{plan}", "--html", "{bad}/r.html"], "--html"),
+        (["plot", "{plan}", "--out", "{bad}/plots"], "--out"),
+        (["terrain", "flat", "--png", "{bad}/t.png"], "--png"),
+        (["generate-course", "--seed", "1", "--out", "{bad}/c.yaml"], "--out"),
+        (["generate-course", "--seed", "1", "--out", "{tmp}/c.yaml", "--png", "{bad}/c.png"],
+         "--png"),
+        (["batch", "{scenarios}", "--out", "{bad}/batch"], "--out"),
+        (["demo", "--out", "{bad}/demo"], "--out"),
+        (["bench", "speed", "--out", "{bad}/bench"], "--out"),
+    ],
+)  # fmt: skip
+def test_an_output_location_that_cannot_be_written_is_refused_first(
+    args, option, where, short_flat_walk, tmp_path, capsys
+):
+    """One line naming the option, before any work (no progress bar: stderr is that line)."""
+    bad = _bad_location(where, tmp_path)
+    scenarios = Path(__file__).parents[1] / "examples" / "scenarios.yaml"
+    fill = dict(bad=bad, plan=short_flat_walk[0], scenarios=scenarios, tmp=tmp_path)
+    assert main([a.format(**fill) for a in args]) == 2
+    err = _one_line_error(capsys, option)
+    assert "cannot write into" in err or "is a file" in err, err
+    assert "wrote" not in capsys.readouterr().out
+
+
+def test_a_device_a_long_name_and_a_full_disk_are_refused_first(
+    short_flat_walk, tmp_path, capsys, monkeypatch
+):
+    path = str(short_flat_walk[0])
+    cases = [
+        (["export", path, "--out", "/dev/null"], "not a regular file"),
+        (["replay", path, "--html", str(tmp_path / ("x" * 300 + ".html"))], "too long"),
+        (["plot", path, "--out", str(tmp_path / ("y" * 300))], "too long"),
+    ]
+    for args, expect in cases:
+        assert main(args) == 2, args
+        _one_line_error(capsys, expect)
+    monkeypatch.setattr("planner.core.outputs.free_bytes", lambda folder: 300_000)
+    for args in (
+        ["plan", "--terrain", "flat", "--goal", "2.2,0", "--out", str(tmp_path / "p.json")],
+        ["simulate", path, "--out", str(tmp_path / "s.json")],
+        ["export", path, "--out", str(tmp_path / "t.csv")],
+    ):
+        assert main(args) == 2, args
+        _one_line_error(capsys, "--out", "free on its disk")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_write_that_fails_after_the_work_keeps_the_result(
+    short_flat_walk, tmp_path, capsys, monkeypatch
+):
+    """The folder becomes unwritable while the command works (here: a file takes its
+    place): the plan, or the executed motion, is kept in the temporary folder, and the one
+    line says where."""
+    import tempfile
+
+    import planner.planning.walk as walk
+    import planner.sim.execution as execution
+    from planner.planfile.loader import load_plan
+    from planner.planfile.validate import check_plan
+
+    safe = tmp_path / "safe"
+    safe.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(safe))
+    out = tmp_path / "out"
+
+    def then_block(work):
+        def wrapped(*a, **kw):
+            result = work(*a, **kw)
+            shutil.rmtree(out, ignore_errors=True)
+            out.write_text("in the way")  # the folder is now a file
+            return result
+
+        return wrapped
+
+    monkeypatch.setattr(walk, "plan_walk", then_block(walk.plan_walk))
+    monkeypatch.setattr(execution, "simulate_plan", then_block(execution.simulate_plan))
+    commands = [
+        ["plan", "--terrain", "flat", "--goal", "0.3,0", "--quiet", "--out", str(out / "p.json")],
+        ["simulate", str(short_flat_walk[0]), "--quiet", "--out", str(out / "s.json")],
+    ]
+    for args in commands:
+        shutil.rmtree(out, ignore_errors=True)
+        out.unlink(missing_ok=True)
+        assert main(args) == 2, args
+        err = _one_line_error(capsys, "--out", "cannot write it", "kept in")
+        kept = Path(err.rsplit("kept in ", 1)[1])
+        assert kept.parent == safe
+        plan = load_plan(kept)  # whole, and a plan
+        if args[0] == "plan":
+            assert check_plan(plan).ok
+
+
+def test_a_batch_whose_disk_fills_keeps_its_records(tmp_path):
+    import errno
+
+    from planner.bench.batch import _Writer, read_results
+    from planner.core.errors import OutputError
+
+    writer = _Writer(tmp_path / "results.jsonl", None)
+    writer.write({"id": "a", "status": "ok"})
+
+    class Full:
+        def write(self, text):
+            raise OSError(errno.ENOSPC, "No space left on device")
+
+        def close(self):
+            raise OSError(errno.ENOSPC, "No space left on device")
+
+    writer.fh.close()
+    writer.fh = Full()
+    with pytest.raises(OutputError, match=r"--out .*results.jsonl \(No space left on device\); "
+                       r"the 1 records written now stay, rerun"):  # fmt: skip
+        writer.write({"id": "b", "status": "ok"})
+    writer.close()  # no second error
+    assert list(read_results(tmp_path / "results.jsonl")) == ["a"]
+
+
+# ------------------------------------------------------------------------------ plan loader
+def _edited_plan(short_flat_walk, tmp_path, edit) -> Path:
+    d = json.loads(Path(short_flat_walk[0]).read_text())
+    if edit == "huge_base_x":
+        d["samples"]["q"][5][0] = 1e300
+    elif edit == "huge_keyframe_x":
+        d["keyframes"][2]["base_position"][0] = 1e300
+    elif edit == "reversed_times":
+        d["samples"]["time"] = d["samples"]["time"][::-1]
+    elif edit == "repeated_time":
+        d["samples"]["time"][6] = d["samples"]["time"][5]
+    elif edit == "huge_joint":
+        d["samples"]["q"][3][9] = 1e6
+    path = tmp_path / f"{edit}.json"
+    path.write_text(json.dumps(d))
+    return path
+
+
+EDITS = ["huge_base_x", "huge_keyframe_x", "reversed_times", "repeated_time", "huge_joint"]
+
+
+@pytest.mark.parametrize("edit", EDITS)
+def test_every_command_refuses_a_plan_no_robot_could_execute(
+    edit, short_flat_walk, tmp_path, capsys
+):
+    """One loader refuses them for every command; ``check`` reports them as violations."""
+    bad = _edited_plan(short_flat_walk, tmp_path, edit)
+    field = {"huge_base_x": "samples.q[5]", "huge_keyframe_x": "keyframes[2].base_position",
+             "reversed_times": "samples.time", "repeated_time": "samples.time[6]",
+             "huge_joint": "samples.q[3][7:]"}[edit]  # fmt: skip
+    good = str(short_flat_walk[0])
+    commands = [
+        ["simulate", str(bad), "--quiet"],
+        ["simulate", str(bad), "--feedback", "--quiet"],
+        ["replay", str(bad), "--html", str(tmp_path / "r.html")],
+        ["replay", good, "--compare", str(bad), "--html", str(tmp_path / "r.html")],
+        ["plot", str(bad), "--out", str(tmp_path / "plots")],
+        ["export", str(bad), "--out", str(tmp_path / "t.csv")],
+    ]
+    for args in commands:
+        assert main(args) == 2, args
+        _one_line_error(capsys, bad.name, field)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [bad.name]
+    assert main(["check", str(bad)]) == 1
+    out = capsys.readouterr().out
+    kind = "time_order" if "time" in edit else "out_of_range"
+    assert f": {kind}: {field}" in out and "FAILED" in out and "skipped" in out, out
+
+
+# ------------------------------------------------------------------------------ export, replay
+def test_export_refuses_a_rate_that_drops_samples_or_memory(short_flat_walk, tmp_path, capsys):
+    from planner.planfile.export import load_trajectory
+
+    path = str(short_flat_walk[0])
+    out = tmp_path / "t.csv"
+    assert main(["export", path, "--rate", "1e9", "--out", str(out)]) == 2  # was 54 GiB
+    _one_line_error(capsys, "--rate 1e+09", "memory", "give --rate")
+    assert main(["export", path, "--rate", "20", "--out", str(out)]) == 2
+    err = _one_line_error(capsys, "--rate 20", "plan samples", "rad off", "--force")
+    need = int(re.search(r"--rate (\d+) or more", err).group(1))
+    assert not out.exists()
+    assert main(["export", path, "--rate", "20", "--out", str(out), "--force"]) == 0
+    warning = capsys.readouterr().err.strip()
+    assert warning.startswith("stratawalk: warning: --rate 20") and warning.count("\n") == 0
+    assert len(load_trajectory(out).t) == 47
+    assert main(["export", path, "--rate", str(need), "--out", str(out)]) == 0  # every sample
+    assert capsys.readouterr().err == ""
+
+
+def test_replay_refuses_a_port_it_cannot_use(short_flat_walk, capsys):
+    path = str(short_flat_walk[0])
+    for port in ("99999", "0", "-5"):
+        assert main(["replay", path, "--port", port, "--seconds", "0"]) == 2
+        _one_line_error(capsys, f"--port {port}", "1..65535")
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = str(busy.getsockname()[1])
+        assert main(["replay", path, "--port", port, "--seconds", "0"]) == 2
+        _one_line_error(capsys, f"--port {port}", "cannot listen")
+
+
+def test_replay_prints_the_port_it_serves_on(short_flat_walk):
+    with socket.socket() as s:  # a port free now
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    proc = _start(["replay", str(short_flat_walk[0]), "--port", str(port), "--geometry",
+                   "collision"])  # fmt: skip
+    try:
+        deadline = time.monotonic() + 120
+        line = ""
+        while "open http" not in line:
+            assert time.monotonic() < deadline, "replay did not start"
+            line = proc.stdout.readline()
+            assert line or proc.poll() is None, proc.stderr.read()
+        assert f"http://127.0.0.1:{port}/static/" in line, line
+        assert not _port_free(port)  # served there
+        proc.send_signal(signal.SIGTERM)
+        proc.wait(20)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+
+
+# ------------------------------------------------------------------------------ small ones
+def test_goal_at_the_start_names_the_option(capsys):
+    assert main(["plan", "--terrain", "flat", "--goal", "0.2,0", "--start", "0.2,0"]) == 2
+    err = _one_line_error(capsys, "--goal 0.2,0", "--start")
+    assert "Trajectory" not in err
+
+
+def test_terrain_yaml_reads_numbers_without_a_signed_exponent(tmp_path, capsys):
+    course = tmp_path / "c.yaml"
+    course.write_text("name: c\nkind: flat\nlength: 1.0e9\n")
+    assert main(["terrain", str(course)]) == 2  # a number (too long), not the string '1.0e9'
+    _one_line_error(capsys, "length", "must be <= 10000")
+    course.write_text("name: c\nkind: flat\nx_min: -5e-1\nlength: 2.5e0\n")
+    assert main(["terrain", str(course)]) == 0
+    assert "bounds (-0.5, 2.0," in capsys.readouterr().out
+    course.write_text("name: c\nkind: flat\nlength: 2,5\n")
+    assert main(["terrain", str(course)]) == 2
+    _one_line_error(capsys, "length", "plain number")
+
+
+def test_robot_given_a_folder_says_so(capsys):
+    assert main(["robot", str(LITTLEDOG_URDF.parent)]) == 2
+    _one_line_error(capsys, "is a folder", "littledog.urdf")

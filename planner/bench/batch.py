@@ -56,7 +56,7 @@ from typing import Any
 import yaml
 
 from planner.core import interrupts
-from planner.core.errors import InputError
+from planner.core.errors import InputError, OutputError
 from planner.core.interrupts import Interrupts
 from planner.core.outputs import check_folder
 
@@ -334,17 +334,31 @@ def read_results(path: str | Path) -> dict[str, dict]:
 
 
 class _Writer:
-    """Appends records to the JSONL, one line each, flushed and synced as they come."""
+    """Appends records to the JSONL, one line each, flushed and synced as they come.
+
+    A write that fails (the disk filled up) is an :class:`OutputError`: the records
+    written before stay, and a rerun goes on from them.
+    """
 
     def __init__(self, path: Path, plans_dir: Path | None):
-        self.path, self.plans_dir = path, plans_dir
-        path.parent.mkdir(parents=True, exist_ok=True)
-        if plans_dir is not None:
-            plans_dir.mkdir(parents=True, exist_ok=True)
-        cut = path.is_file() and path.stat().st_size > 0 and not path.read_bytes().endswith(b"\n")
-        self.fh = path.open("a", encoding="utf-8")
-        if cut:  # the last line was cut short: end it, so it stays a lone broken line
-            self.fh.write("\n")
+        self.path, self.plans_dir, self.written = path, plans_dir, 0
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            if plans_dir is not None:
+                plans_dir.mkdir(parents=True, exist_ok=True)
+            cut = path.is_file() and path.stat().st_size > 0
+            cut = cut and not path.read_bytes().endswith(b"\n")
+            self.fh = path.open("a", encoding="utf-8")
+            if cut:  # the last line was cut short: end it, so it stays a lone broken line
+                self.fh.write("\n")
+        except OSError as exc:
+            raise self._failed(exc) from None
+
+    def _failed(self, exc: OSError) -> OutputError:
+        return OutputError(
+            f"--out {self.path.parent}: cannot write {self.path.name} ({exc.strerror or exc});"
+            f" the {self.written} records written now stay, rerun to go on from them"
+        )
 
     def write(self, rec: dict) -> None:
         plan = rec.pop("plan", None)
@@ -352,12 +366,19 @@ class _Writer:
             from planner.planfile.plan import Plan
 
             rec["plan_file"] = str(Plan.from_dict(plan).save(self.plans_dir / f"{rec['id']}.json"))
-        self.fh.write(json.dumps(_clean(rec), allow_nan=False) + "\n")
-        self.fh.flush()
-        os.fsync(self.fh.fileno())
+        try:
+            self.fh.write(json.dumps(_clean(rec), allow_nan=False) + "\n")
+            self.fh.flush()
+            os.fsync(self.fh.fileno())
+        except OSError as exc:
+            raise self._failed(exc) from None
+        self.written += 1
 
     def close(self) -> None:
-        self.fh.close()
+        try:
+            self.fh.close()
+        except OSError:  # a line cut short by a full disk: read_results skips it
+            pass
 
 
 def _clean(v):

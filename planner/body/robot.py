@@ -99,6 +99,13 @@ def _parse_urdf_xml(path: Path) -> ET.Element:
 
 
 def _build_model(path: Path) -> pin.Model:
+    if path.is_dir():
+        inside = sorted(p.name for p in path.glob("*.urdf"))[:3]
+        raise _fail(
+            path,
+            "is a folder, not a URDF file; give the path of the .urdf file"
+            + (f" (in it: {', '.join(inside)})" if inside else ""),
+        )
     if not path.is_file():
         raise _fail(path, "file not found; give an existing URDF path or a known robot name")
     root = _parse_urdf_xml(path)

@@ -45,6 +45,17 @@ def add_generate_parser(subparsers) -> argparse.ArgumentParser:
 
 def cmd_generate(args) -> int:
     """Run ``stratawalk generate-course``: write the spec, check that it loads."""
+    import os
+
+    from planner.core.outputs import check_file, check_folder
+
+    try:  # an existing folder gets COURSE.yaml; anything else is the file's name
+        folder = str(args.out).strip() != "" and os.path.isdir(args.out)
+    except ValueError:  # a NUL character: check_file says so
+        folder = False
+    (check_folder if folder else check_file)(args.out, "--out")
+    if args.png is not None:
+        check_file(args.png, "--png", suffixes=(".png",))
     if args.feature:
         spec = course_spec(f"{_FEAT}:{args.feature}")
     else:
@@ -59,7 +70,7 @@ def cmd_generate(args) -> int:
         f"wrote {path}: {terrain.name}, bounds {terrain.bounds}, features {', '.join(kinds)}; "
         f"walk to {course_goal_xy(terrain.spec)}"
     )
-    if args.png:
+    if args.png is not None:
         from planner.replay.terrain_plot import plot_top_view
 
         plot_top_view(terrain, args.png)

@@ -89,13 +89,13 @@ def _cmd_terrain(args) -> int:
     if args.name is None:
         print("\n".join(list_terrains()))
         return 0
-    if args.png:
+    if args.png is not None:
         from planner.core.outputs import check_file
 
         check_file(args.png, "--png", suffixes=(".png",))
     terrain = load_terrain(args.name)
     print(f"terrain {terrain.name}: bounds {terrain.bounds}")
-    if args.png and args.guide is not None:  # the robot's cost map and the guide path
+    if args.png is not None and args.guide is not None:  # the robot's cost map and the guide path
         from planner.body.robot import load_robot
         from planner.motion.guide_path import guide_path
         from planner.replay.terrain_plot import plot_guide_map
@@ -109,7 +109,7 @@ def _cmd_terrain(args) -> int:
         )
         plot_guide_map(g.map, g.xy_W if g.tau is not None else None, args.png, title)
         print(f"{what}; wrote {args.png}")
-    elif args.png:
+    elif args.png is not None:
         from planner.replay.terrain_plot import plot_top_view
 
         plot_top_view(terrain, args.png)
@@ -200,8 +200,15 @@ def _cmd_plan(args) -> int:
     else:
         goal = _parse_xy(args.goal, "goal")
     start = _parse_xy(args.start, "start")
+    if math.hypot(goal[0] - start[0], goal[1] - start[1]) < 1e-3:
+        raise InputError(
+            f"--goal {goal[0]:g},{goal[1]:g}: the start itself (--start {start[0]:g},"
+            f"{start[1]:g}); give a goal at least 1 mm away from it"
+        )
     check_endpoints(robot, terrain, start, goal, ("--start", "--goal"))
-    check_file(args.out, "--out")
+    # the plan file is mostly its terrain grid: 5 mm cells over the walk and 0.3 m around
+    cells = (abs(goal[0] - start[0]) + 1.3) * (abs(goal[1] - start[1]) + 1.0) / 0.005**2
+    check_file(args.out, "--out", size_b=20 * cells + 2**20)
     t0 = time.perf_counter()
     total = float(np.hypot(goal[0] - start[0], goal[1] - start[1]))
     furthest = [0.0]
@@ -263,25 +270,26 @@ def _cmd_plan(args) -> int:
 
 
 def _cmd_demo(args) -> int:
-    from pathlib import Path
-
     from planner.body.robot import load_robot
+    from planner.core.outputs import check_file, check_folder
 
+    out = check_folder(args.out, "--out", size_b=20 * 2**20)
+    for name in ("plan.json", "replay.html"):
+        check_file(out / name, "--out")
+    check_folder(out / "figures", "--out")
     robot = load_robot("littledog")
     print(robot_summary(robot))
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     print(f"\nplanning LittleDog 2 m over {args.terrain} (soft persuasion, section 8.2) ...")
     plan_args = build_parser().parse_args(  # every option of `plan`, at its default
         ["plan", "--terrain", args.terrain, "--goal", "2.2,0", "--out", str(out / "plan.json")]
     )
     rc = _cmd_plan(plan_args)
     print(f"plan: {out / 'plan.json'}  (check it: stratawalk check {out / 'plan.json'})")
-    from planner.planfile.plan import Plan
+    from planner.planfile.loader import load_plan
     from planner.replay import write_html
     from planner.replay.plots import plan_series, plot_plan
 
-    plan = Plan.load(out / "plan.json")
+    plan = load_plan(out / "plan.json")
     series = plan_series(plan)
     write_html(plan, out / "replay.html", series=series)
     figures = plot_plan(plan, out / "figures", series=series)
@@ -348,6 +356,11 @@ def _add_export_parser(subparsers):
     p.add_argument("plan", help="plan.json written by `stratawalk plan`")
     p.add_argument("--rate", type=float, default=500.0, help="rows per second (default 500)")
     p.add_argument("--out", required=True, help="FILE.csv or FILE.npz")
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="export at a --rate too low to reproduce every plan sample (with a warning)",
+    )
     p.add_argument("--robot", metavar="URDF", help=ROBOT_HELP)
     p.set_defaults(func=_cmd_export)
     return p
@@ -356,11 +369,15 @@ def _add_export_parser(subparsers):
 def _cmd_export(args) -> int:
     """Run ``stratawalk export`` (planner/planfile/export.py)."""
     from planner.core.outputs import check_file
-    from planner.planfile.export import export_plan
-    from planner.planfile.plan import Plan
+    from planner.planfile.export import export_plan, export_rows, file_size_b
+    from planner.planfile.loader import load_plan
 
     check_file(args.out, "--out", suffixes=(".csv", ".npz"))
-    traj = export_plan(Plan.load(args.plan, robot=args.robot), args.rate)
+    plan = load_plan(args.plan, robot=args.robot)
+    check_file(args.out, "--out", size_b=file_size_b(export_rows(plan, args.rate), args.out))
+    traj = export_plan(plan, args.rate, force=args.force)
+    if traj.skipped:
+        print(f"stratawalk: warning: {one_line(traj.skipped)}", file=sys.stderr)
     path = traj.save(args.out)
     print(
         f"wrote {path}: {len(traj.t)} rows at {traj.rate_hz:g} Hz, {traj.t[-1] - traj.t[0]:.2f} s, "
@@ -373,7 +390,12 @@ class _Parser(argparse.ArgumentParser):
     """An argument parser whose errors are one line (no usage block), exit status 2."""
 
     def error(self, message: str):
-        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+        self.exit(2, f"{self.prog}: error: {one_line(message)} (see {self.prog} --help)\n")
+
+
+def one_line(text: object) -> str:
+    """``text`` on one line: its line breaks (e.g. in a value given) written as escapes."""
+    return str(text).replace("\r", "\\r").replace("\n", "\\n")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -482,7 +504,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(args.func(args) or 0)
     except PlannerError as exc:
-        print(f"stratawalk: error: {exc}", file=sys.stderr)
+        print(f"stratawalk: error: {one_line(exc)}", file=sys.stderr)
         return 2
 
 

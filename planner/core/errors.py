@@ -20,6 +20,14 @@ class TerrainError(InputError):
     """A terrain spec or height-field file is malformed."""
 
 
+class OutputError(PlannerError):
+    """An output could not be written after the work; ``kept``: where the result went instead."""
+
+    def __init__(self, message: str, kept=None):
+        super().__init__(message)
+        self.kept = kept
+
+
 class NoSolutionFound(PlannerError):
     """An optimisation problem has no feasible solution; carries the diagnosis."""
 

@@ -14,8 +14,12 @@ time is always a row). Each row holds:
 Interpolation: the plan is piecewise linear in time between its samples (what the MuJoCo
 executor tracks). A row holds the plan's value at t_i and the slope of the plan segment
 that starts at or before t_i, so ``q(t) = q_i + (t - t_i) dq_i`` for t_i <= t < t_{i+1}
-reproduces the plan exactly up to the next sample time, and so every sample (samples are
-more than one row period apart). The quaternion is interpolated linearly and normalised.
+reproduces the plan exactly up to the next sample time, and so every sample whose segment
+holds a row: all of them at a rate of at least 1 / (the shortest sample interval). Below
+that :func:`export_plan` refuses (``--force`` exports all the same, with a warning naming
+the samples skipped and how far off they are). The rows' memory is bounded: a rate whose
+rows would take more than half the memory available is refused. The quaternion is
+interpolated linearly and normalised.
 Contact flags are the segment's: a foot in contact at both of its ends.
 Forces and torques are the least-squares holding forces of :mod:`planner.body.torques` at the
 samples (a foot unloads before lift-off, loads after touch-down:
@@ -36,13 +40,25 @@ from numpy.typing import NDArray
 
 from planner.body.robot import LEG_NAMES
 from planner.core.errors import InputError
+from planner.planfile.loader import refuse_flaws
 
 if TYPE_CHECKING:
     from planner.planfile.plan import Plan
 
-__all__ = ["ExportedTrajectory", "export_plan", "load_trajectory", "plan_from_trajectory"]
+__all__ = [
+    "ROW_MEMORY_B",
+    "ExportedTrajectory",
+    "export_plan",
+    "export_rows",
+    "file_size_b",
+    "load_trajectory",
+    "plan_from_trajectory",
+]
 
 _Array = NDArray[np.float64]
+
+ROW_MEMORY_B = 3072  # memory a row takes while it is made and written (measured: 2.5 KiB)
+_FILE_ROW_B = {".csv": 1300, ".npz": 600}  # bytes a row takes in the file (CSV measured)
 
 
 @dataclass
@@ -61,6 +77,7 @@ class ExportedTrajectory:
     contact: NDArray[np.bool_]  # (M, 4)
     forces: _Array  # (M, 4, 3)
     torque_ff: _Array  # (M, 12)
+    skipped: str = ""  # with force: which plan samples the rows do not reproduce, and why
 
     def columns(self) -> list[str]:
         """CSV header, in the order of :meth:`table`'s columns."""
@@ -95,9 +112,11 @@ class ExportedTrajectory:
 
     def save(self, path: str | Path) -> Path:
         """Write CSV (``.csv``) or npz (``.npz``), chosen by the suffix."""
-        from planner.core.outputs import check_file, write_atomic
+        from planner.core.outputs import write_atomic
 
-        path = check_file(path, "--out", suffixes=(".csv", ".npz"))
+        path = Path(path)
+        if path.suffix.lower() not in (".csv", ".npz"):
+            raise InputError(f"--out {path}: give a file name ending in .csv or .npz")
 
         def write(tmp: Path) -> None:
             if path.suffix.lower() == ".npz":
@@ -130,22 +149,107 @@ def _omega_W(qa: _Array, qb: _Array, dt: float) -> _Array:
     return pin.log3(rb @ ra.T) / dt
 
 
-def export_plan(plan: Plan, rate_hz: float) -> ExportedTrajectory:
-    """The plan at ``rate_hz`` (module docstring); InputError for a bad rate or plan."""
+def _available_memory_b() -> float:
+    """Bytes this process may still allocate (inf if unknown).
+
+    The system's available memory, or less under an address-space limit.
+    """
+    import resource
+
+    avail = math.inf
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                avail = float(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    soft = resource.getrlimit(resource.RLIMIT_AS)[0]
+    if soft != resource.RLIM_INFINITY:
+        try:
+            status = Path("/proc/self/status").read_text()
+            size = next(ln for ln in status.splitlines() if ln.startswith("VmSize:"))
+            avail = min(avail, soft - float(size.split()[1]) * 1024)
+        except (OSError, ValueError, StopIteration):
+            avail = min(avail, soft / 2)
+    return avail
+
+
+def _check_rate(plan: Plan, rate_hz: float) -> _Array:
+    """The plan's sample times; InputError for a bad rate or plan."""
+    if not (isinstance(rate_hz, (int, float)) and math.isfinite(rate_hz) and rate_hz > 0):
+        raise InputError(f"--rate: must be a number of rows per second > 0, got {rate_hz!r}")
+    refuse_flaws(plan)
+    return np.asarray(plan.samples.time, float)
+
+
+def export_rows(plan: Plan, rate_hz: float) -> int:
+    """Rows of ``plan`` at ``rate_hz``.
+
+    InputError if they would take more than half the memory available
+    (:data:`ROW_MEMORY_B` each), or for a bad rate or plan.
+    """
+    times = _check_rate(plan, rate_hz)
+    dur = float(times[-1] - times[0])
+    rows = math.floor(dur * rate_hz + 1e-9) + 2
+    avail = _available_memory_b()
+    cap = max(2, math.floor(0.5 * avail / ROW_MEMORY_B)) if math.isfinite(avail) else 10**8
+    if rows > cap:
+        raise InputError(
+            f"--rate {rate_hz:g}: {rows:.3g} rows of a {dur:.3g} s walk would take about "
+            f"{rows * ROW_MEMORY_B / 2**30:.3g} GiB of memory, more than half of the "
+            f"{avail / 2**30:.3g} GiB available; give --rate {max(1, math.floor((cap - 2) / dur))} "
+            "or less"
+        )
+    return rows
+
+
+def file_size_b(rows: int, path: str | Path) -> float:
+    """About the bytes of ``rows`` rows in the file ``path`` (CSV or npz)."""
+    return rows * _FILE_ROW_B.get(Path(path).suffix.lower(), _FILE_ROW_B[".csv"])
+
+
+def _skipped(plan: Plan, times: _Array, t: _Array, rate_hz: float) -> str:
+    """Which samples the rows ``t`` skip (none of them in the sample's segment), or ""."""
+    lo = np.searchsorted(t, times[:-1], side="left")
+    hi = np.searchsorted(t, times[1:], side="right")
+    missed = np.flatnonzero(hi == lo) + 1  # sample m: no row in [t_(m-1), t_m]
+    if len(missed) == 0:
+        return ""
+    q = plan.samples.q
+    slope = np.diff(q, axis=0) / np.diff(times)[:, None]
+    row = np.searchsorted(t, times[missed], side="right") - 1  # the row before the sample
+    j = _segment_index(times, t[row])
+    off = q[j] + (times[missed] - times[j])[:, None] * slope[j] - q[missed]
+    need = math.ceil(1.0 / float(np.diff(times).min()))
+    return (
+        f"--rate {rate_hz:g}: rows {1e3 / rate_hz:.3g} ms apart skip {len(missed)} of "
+        f"{len(times)} plan samples (up to {np.abs(off[:, 7:]).max():.3g} rad off in a joint, "
+        f"{1e3 * np.linalg.norm(off[:, :3], axis=1).max():.3g} mm in the base); --rate {need} "
+        "or more reproduces every sample"
+    )
+
+
+def export_plan(plan: Plan, rate_hz: float, force: bool = False) -> ExportedTrajectory:
+    """The plan at ``rate_hz`` (module docstring).
+
+    InputError for a bad rate or plan, rows that would not fit in memory, or (unless
+    ``force``; then the trajectory's ``skipped`` says so) a rate too low to reproduce
+    every plan sample.
+    """
     from planner.body.torques import TorqueCheck, holding_load
     from planner.planfile.plan import loaded_feet
 
-    if not (isinstance(rate_hz, (int, float)) and math.isfinite(rate_hz) and rate_hz > 0):
-        raise InputError(f"--rate: must be a number of rows per second > 0, got {rate_hz!r}")
+    export_rows(plan, rate_hz)
     s = plan.samples
-    if len(s) < 2:
-        raise InputError(f"{plan.source}: samples: need at least 2 samples to export")
     times = np.asarray(s.time, float)
     dur = float(times[-1] - times[0])
     n = int(math.floor(dur * rate_hz + 1e-9))
     t = times[0] + np.arange(n + 1) / rate_hz
     if t[-1] < times[-1] - 1e-12:
         t = np.append(t, times[-1])
+    skipped = _skipped(plan, times, t, rate_hz)
+    if skipped and not force:
+        raise InputError(f"{skipped}; or add --force to export at this rate all the same")
     k = _segment_index(times, t)
     dt_seg = np.diff(times)
     slope = np.diff(s.q, axis=0) / dt_seg[:, None]  # (N-1, 19)
@@ -179,6 +283,7 @@ def export_plan(plan: Plan, rate_hz: float) -> ExportedTrajectory:
             -1, 4, 3
         ),
         torque_ff=(1 - u) * tau[k] + u * tau[k + 1],
+        skipped=skipped,
     )
 
 
@@ -230,4 +335,4 @@ def plan_from_trajectory(plan: Plan, traj: ExportedTrajectory) -> Plan:
     out = type(plan).from_dict(plan.to_dict(), source=f"{plan.source} (exported trajectory)")
     out.samples = type(plan.samples)(traj.t.copy(), traj.pinocchio_q(), traj.contact.copy())
     out._robot_cache, out._terrain_cache = plan._robot_cache, plan._terrain_cache
-    return out
+    return refuse_flaws(out)

@@ -17,7 +17,9 @@ them from ``q`` with Pinocchio forward kinematics.
 
 Loading refuses a malformed file with a one-line :class:`~planner.core.errors.InputError`
 naming the file and the field path (``plan.json: keyframes[3].joints: expected 12
-numbers, got 11``).
+numbers, got 11``). A file that parses yet is no motion (sample times that do not increase,
+absurd coordinates) is refused by :func:`planner.planfile.loader.load_plan`, the loader of
+the commands.
 """
 
 from __future__ import annotations
@@ -545,11 +547,16 @@ class Plan:
         )
 
     def save(self, path: str | Path) -> Path:
-        """Write the plan as JSON (floats at full precision), atomically (temp file + rename)."""
-        from planner.core.outputs import check_file, write_atomic
+        """Write the plan as JSON (floats at full precision), atomically (temp file + rename).
+
+        If that fails, the plan goes to the temporary folder and an
+        :class:`~planner.core.errors.OutputError` says where
+        (:func:`~planner.core.outputs.write_atomic`).
+        """
+        from planner.core.outputs import write_atomic
 
         text = json.dumps(self.to_dict(), allow_nan=False, separators=(",", ":")) + "\n"
-        return write_atomic(check_file(path), lambda tmp: tmp.write_text(text, "utf-8"))
+        return write_atomic(path, lambda tmp: tmp.write_text(text, "utf-8"))
 
     @classmethod
     def load(cls, path: str | Path, robot: str | Path | None = None) -> Plan:

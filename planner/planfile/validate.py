@@ -8,10 +8,11 @@ Checks (``Violation.kind``), at every sample unless marked keyframe:
 
 ``robot_mismatch``
     The URDF's joint names, foot frames or foot radius differ from the file's.
-``empty_plan``
-    Fewer than two samples, or no keyframe: nothing a robot could execute.
-``time_order``
-    ``samples.time`` decreases.
+``empty_plan``, ``time_order``, ``out_of_range``, ``plan_structure``
+    A plan no robot could execute (:mod:`planner.planfile.loader`: fewer than two samples,
+    sample times that do not increase, absurd numbers, a degenerate terrain grid), which
+    every other command refuses; the other checks are then skipped. ``empty_plan`` also:
+    no keyframe.
 ``keyframe_fk`` (keyframes)
     Pinocchio's foot sphere centre vs the stored foot: ``r + rho n(r)`` for a foot in
     contact (the smaller of that mismatch and ``|c - rho n - r|`` with n taken under the
@@ -100,6 +101,7 @@ from planner.body.torques import TorqueCheck
 from planner.core.errors import PlannerError
 from planner.core.units import GRAVITY_M_S2
 from planner.motion.interpolate import BETWEEN_SAMPLES_RAD, BETWEEN_STEP_RAD, between_q
+from planner.planfile.loader import structure_flaws
 from planner.planfile.plan import Plan
 
 if TYPE_CHECKING:
@@ -215,6 +217,7 @@ class CheckReport:
     max_slip_m: float = math.nan
     elapsed_s: float = 0.0
     tolerances: CheckTolerances = field(default_factory=CheckTolerances)
+    structure_only: bool = False  # a malformed plan: the other checks were skipped
 
     @property
     def ok(self) -> bool:
@@ -241,6 +244,11 @@ class CheckReport:
         if self.ok:
             return f"{head}: OK ({figs}; {self.elapsed_s:.2f} s)"
         kinds = ", ".join(f"{k} {n}" for k, n in sorted(self.by_kind().items()))
+        if self.structure_only:
+            return (
+                f"{head}: FAILED, {len(self.violations)} violations ({kinds}); no motion a "
+                f"robot could execute, so the other checks were skipped ({self.elapsed_s:.2f} s)"
+            )
         return (
             f"{head}: FAILED, {len(self.violations)} violations ({kinds}) ({figs}; "
             f"{self.elapsed_s:.2f} s)"
@@ -462,12 +470,15 @@ class _Checker:
         return np.array([self.data.oMf[i].translation for i in self.foot_ids]), np.array(com)
 
     # ---- file-level ------------------------------------------------------------------
+    def structure(self) -> bool:
+        """The structural flaws (:func:`structure_flaws`) as violations; True if none."""
+        flaws = structure_flaws(self.plan)
+        for f in flaws:
+            self.add(f.kind, f.where, None, f.value, f.limit, f"{f.field}: {f.message}")
+        return not flaws
+
     def not_empty(self) -> None:
-        n, k = len(self.plan.samples), len(self.plan.keyframes)
-        if n < 2:
-            self.add("empty_plan", "plan", None, float(n), 2.0,
-                     f"{n} samples; a motion needs at least 2")  # fmt: skip
-        if k < 1:
+        if not self.plan.keyframes:
             self.add("empty_plan", "plan", None, 0.0, 1.0, "no keyframes; a plan has at least 1")
 
     def robot_consistency(self) -> None:
@@ -590,16 +601,6 @@ class _Checker:
         n = len(sm)
         if n == 0:
             return
-        back = np.flatnonzero(np.diff(sm.time) < 0.0)
-        for k in back:
-            self.add(
-                "time_order",
-                f"sample {k + 1}",
-                None,
-                sm.time[k + 1] - sm.time[k],
-                0.0,
-                f"time {sm.time[k + 1]:.6g} s is before the previous sample's {sm.time[k]:.6g} s",
-            )
         centres = np.empty((n, 4, 3))
         coms = np.empty((n, 3))
         foot_rot = np.empty((n, 4, 3, 3))
@@ -1049,10 +1050,13 @@ def check_plan(plan: Plan, tolerances: CheckTolerances | None = None) -> CheckRe
     report = CheckReport(
         n_samples=len(plan.samples), n_keyframes=len(plan.keyframes), tolerances=tol
     )
+    well_formed = ck.structure()
     ck.not_empty()
     ck.robot_consistency()
-    ck.keyframes()
-    ck.samples(report)
+    if well_formed:
+        ck.keyframes()
+        ck.samples(report)
+    report.structure_only = not well_formed
     report.violations = sorted(ck.violations, key=_order)
     report.elapsed_s = time.perf_counter() - t0
     return report
@@ -1086,7 +1090,8 @@ def main_check(
         plan = Plan.load(path, robot=robot)
         report = check_plan(plan)
     except PlannerError as exc:
-        print(f"stratawalk check: error: {exc}", file=err)
+        text = str(exc).replace("\r", "\\r").replace("\n", "\\n")  # one line
+        print(f"stratawalk check: error: {text}", file=err)
         return 2
     shown = report.violations if show_all else report.violations[:MAX_PRINTED]
     for v in shown:

@@ -15,7 +15,7 @@ DESIGN.md section 2, step 6. The parts, one concept each:
 from planner.replay.command import add_replay_parser, cmd_replay
 from planner.replay.page import notebook_html, scene_html, write_html
 from planner.replay.scene import GEOMETRIES, Scene, build_scene
-from planner.replay.server import DEFAULT_HOST, ReplayServer, check_host
+from planner.replay.server import DEFAULT_HOST, ReplayServer, check_host, check_port
 
 __all__ = [
     "DEFAULT_HOST",
@@ -25,6 +25,7 @@ __all__ = [
     "add_replay_parser",
     "build_scene",
     "check_host",
+    "check_port",
     "cmd_replay",
     "notebook_html",
     "scene_html",

@@ -10,7 +10,7 @@ from planner.core.interrupts import Interrupts
 from planner.core.outputs import ROBOT_HELP, check_file
 from planner.replay.page import write_html
 from planner.replay.scene import GEOMETRIES, build_scene
-from planner.replay.server import DEFAULT_HOST, ReplayServer, check_host
+from planner.replay.server import DEFAULT_HOST, ReplayServer, check_host, check_port
 
 __all__ = ["add_replay_parser", "cmd_replay"]
 
@@ -23,7 +23,9 @@ def add_replay_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("plan", help="plan.json written by `stratawalk plan`")
     p.add_argument("--html", help="write a self-contained HTML replay here instead of serving")
     p.add_argument("--host", default=DEFAULT_HOST, help="address to serve on (default 127.0.0.1)")
-    p.add_argument("--port", type=int, default=None, help="web port (default: first free >= 7000)")
+    p.add_argument(
+        "--port", type=int, default=None, help="web port, 1..65535 (default: first free >= 7000)"
+    )
     p.add_argument(
         "--allow-remote", action="store_true", help="allow a non-loopback --host (no auth!)"
     )
@@ -54,13 +56,15 @@ def add_replay_parser(subparsers) -> argparse.ArgumentParser:
 
 def cmd_replay(args) -> int:
     """Run ``stratawalk replay``: write the HTML file, or serve the walk until Ctrl-C."""
-    from planner.planfile.plan import Plan
+    from planner.planfile.loader import load_plan
 
     host = None if args.html else check_host(args.host, args.allow_remote)
     if args.html is not None:
-        check_file(args.html, "--html", suffixes=(".html", ".htm"))
-    plan = Plan.load(args.plan, robot=args.robot)
-    compare = None if args.compare is None else Plan.load(args.compare, robot=args.robot)
+        check_file(args.html, "--html", suffixes=(".html", ".htm"), size_b=4 * 2**20)
+    else:
+        check_port(host, args.port)
+    plan = load_plan(args.plan, robot=args.robot)
+    compare = None if args.compare is None else load_plan(args.compare, robot=args.robot)
     options = dict(
         speed=args.speed, geometry=args.geometry, follow=not args.fixed_camera, compare=compare
     )

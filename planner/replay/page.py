@@ -16,7 +16,7 @@ import json
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from planner.core.outputs import check_file, write_atomic
+from planner.core.outputs import write_atomic
 from planner.replay.scene import (
     COM_RGB,
     COMPARE_RGBA,
@@ -196,14 +196,15 @@ def write_html(
     The options are :func:`planner.replay.scene.build_scene`'s. The file is written to a
     temporary name beside it and then renamed, so it is whole or absent.
     """
+    from planner.planfile.loader import load_plan
     from planner.planfile.plan import Plan
 
-    plan = plan if isinstance(plan, Plan) else Plan.load(plan)
+    plan = plan if isinstance(plan, Plan) else load_plan(plan)
     scene = build_scene(
         plan, series, speed=speed, geometry=geometry, follow=follow, compare=compare
     )
     page = scene_html(scene, autoplay, title=f"stratawalk: {plan.source}")
-    return write_atomic(check_file(path, "--html"), lambda tmp: tmp.write_text(page, "utf-8"))
+    return write_atomic(path, lambda tmp: tmp.write_text(page, "utf-8"), option="--html")
 
 
 def notebook_html(scene: Scene | Plan, height: int = 480, speed: float = 4.0):

@@ -388,15 +388,15 @@ def plot_plan(
     """Write the four figures of ``plan`` as PNG files into ``out_dir``; return their paths.
 
     ``plan`` may be a :class:`~planner.planfile.plan.Plan` or a path, read with
-    :meth:`Plan.load <planner.planfile.plan.Plan.load>` (one-line InputError for a bad file).
+    :func:`~planner.planfile.loader.load_plan` (one-line InputError for a bad file).
     """
     from planner.core.outputs import write_atomic
+    from planner.planfile.loader import load_plan
     from planner.planfile.plan import Plan
 
-    plan = plan if isinstance(plan, Plan) else Plan.load(plan)
+    plan = plan if isinstance(plan, Plan) else load_plan(plan)
     s = plan_series(plan) if series is None else series
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     paths = []
     for name in FIGURES:
         fig = _DRAW[name](plan, s)
@@ -420,11 +420,13 @@ def add_plot_parser(subparsers) -> argparse.ArgumentParser:
 def cmd_plot(args) -> int:
     """Run ``stratawalk plot``: write the figures and print where they are."""
     from planner.core.errors import InputError
-    from planner.core.outputs import check_folder
+    from planner.core.outputs import check_file, check_folder
 
     if not 10 <= args.dpi <= 1200:
         raise InputError(f"--dpi: expected 10..1200 pixels per inch, got {args.dpi}")
-    check_folder(args.out, "--out")
+    check_folder(args.out, "--out", size_b=4 * 2**20)
+    for name in FIGURES:
+        check_file(Path(args.out) / f"{name}.png", "--out")
     for path in plot_plan(args.plan, args.out, dpi=args.dpi):
         print(f"wrote {path}")
     return 0

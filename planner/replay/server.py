@@ -12,6 +12,7 @@ import ipaddress
 import os
 import re
 import signal
+import socket
 import subprocess
 import sys
 import threading
@@ -22,7 +23,7 @@ from planner.core.errors import InputError, PlannerError
 if TYPE_CHECKING:
     from planner.replay.scene import Scene
 
-__all__ = ["DEFAULT_HOST", "ReplayServer", "check_host"]
+__all__ = ["DEFAULT_HOST", "ReplayServer", "check_host", "check_port"]
 
 DEFAULT_HOST = "127.0.0.1"
 
@@ -54,6 +55,28 @@ def check_host(host: str, allow_remote: bool = False) -> str:
     )
 
 
+def check_port(host: str, port: int | None) -> None:
+    """InputError unless ``host`` can listen on ``port`` now.
+
+    None is the first free port from 7000; else 1..65535, free, and allowed to this user.
+    """
+    if port is None:
+        return
+    if not 1 <= port <= 65535:
+        raise InputError(f"--port {port}: expected 1..65535, or leave it out (the first free "
+                         "port from 7000)")  # fmt: skip
+    try:
+        family, kind, proto, _, address = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)[0]
+        with socket.socket(family, kind, proto) as s:
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as the server does
+            s.bind(address)
+    except OSError as exc:
+        raise InputError(
+            f"--port {port}: cannot listen on {host}:{port} ({exc.strerror or exc}); choose "
+            "another port, or leave --port out (the first free one from 7000)"
+        ) from None
+
+
 def _serve(host: str, port: int | None) -> None:
     """Run a meshcat server (subprocess body): web on ``host``, ZeroMQ on loopback only."""
     from meshcat.servers.zmqserver import ZMQWebSocketBridge
@@ -64,7 +87,8 @@ def _serve(host: str, port: int | None) -> None:
             listen = app.listen
 
             def listen_on_host(p, **kw):
-                return listen(p, address=self.host, **kw)
+                self.http_server = listen(p, address=self.host, **kw)
+                return self.http_server
 
             app.listen = listen_on_host
             return app
@@ -74,7 +98,9 @@ def _serve(host: str, port: int | None) -> None:
 
     bridge = Bridge(host=host, port=port)
     shown = f"[{host}]" if ":" in host else host
-    bridge.web_url = f"http://{shown}:{bridge.fileserver_port}/static/"
+    sockets = list(getattr(bridge.http_server, "_sockets", {}).values())
+    real = sockets[0].getsockname()[1] if sockets else bridge.fileserver_port  # the bound one
+    bridge.web_url = f"http://{shown}:{real}/static/"
     print(f"zmq_url={bridge.zmq_url}", flush=True)
     print(f"web_url={bridge.web_url}", flush=True)
     bridge.run()

@@ -77,7 +77,9 @@ def plot_top_view(
         ax.set_aspect("equal")
         ax.set_title(f"{terrain.name} ({terrain.kind}, sharp heights, {res * 1000:.3g} mm grid)")
         out = write_atomic(
-            path_png, lambda tmp: fig.savefig(tmp, dpi=120, bbox_inches="tight", format="png")
+            path_png,
+            lambda tmp: fig.savefig(tmp, dpi=120, bbox_inches="tight", format="png"),
+            option="--png",
         )
     finally:
         plt.close(fig)
@@ -118,7 +120,9 @@ def plot_guide_map(tmap, path_xy, path_png: str | Path, title: str) -> Path:
         ax.set_aspect("equal")
         ax.set_title(title)
         out = write_atomic(
-            path_png, lambda tmp: fig.savefig(tmp, dpi=120, bbox_inches="tight", format="png")
+            path_png,
+            lambda tmp: fig.savefig(tmp, dpi=120, bbox_inches="tight", format="png"),
+            option="--png",
         )
     finally:
         plt.close(fig)

@@ -73,10 +73,11 @@ def cmd_simulate(args) -> int:
     """
     from planner.core.interrupts import Interrupts
     from planner.core.outputs import check_file
+    from planner.planfile.loader import load_plan
 
-    if args.out:
-        check_file(args.out, "--out")
-    plan = Plan.load(args.plan, robot=args.robot)
+    plan = load_plan(args.plan, robot=args.robot)
+    if args.out is not None:  # the executed motion: about the plan's size (grid and samples)
+        check_file(args.out, "--out", size_b=2 * Path(args.plan).stat().st_size)
     settings = SimSettings(
         time_scale=args.time_scale, timestep_s=args.timestep, feedforward=not args.no_feedforward
     )
@@ -109,7 +110,7 @@ def cmd_simulate(args) -> int:
         if bar is not None:
             print(file=sys.stderr)
         print(res.metrics.summary())
-        if args.out:
+        if args.out is not None:
             with stop.shielded():
                 path = res.executed.save(args.out)
             print(f"wrote {path}: {len(res.executed.samples)} executed samples")

@@ -80,6 +80,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -242,6 +243,21 @@ def _error(source: str, field: str, message: str) -> TerrainError:
     return TerrainError(_one_line(f"{source}: field '{field}': {message}"))
 
 
+class _YamlLoader(yaml.SafeLoader):
+    """PyYAML's safe loader (YAML 1.1), reading YAML 1.2's floats too.
+
+    ``1e9`` and ``1.0e9`` are numbers (YAML 1.1 wants a dot and a signed exponent,
+    ``1.0e+9``, and reads them as strings).
+    """
+
+
+_YamlLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?[0-9][0-9_]*(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"),
+    list("-+0123456789"),
+)
+
+
 def _show(value: Any) -> str:
     """Short repr of a bad value for an error message."""
     text = repr(value)
@@ -299,7 +315,9 @@ class _Fields:
         if value is None:
             return value
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise self.fail(key, f"expected a number, got {_show(value)}")
+            numeric = isinstance(value, str) and any(c.isdigit() for c in value)
+            hint = "; write it as a plain number, e.g. 0.25 or 1e3" * numeric
+            raise self.fail(key, f"expected a number, got {_show(value)}{hint}")
         value = float(value)
         if not math.isfinite(value):
             raise self.fail(key, f"expected a finite number, got {value}")
@@ -1482,7 +1500,7 @@ def load_terrain(name_or_path: str | Path) -> Terrain:
             )
     source = _display(path)
     try:
-        data = yaml.safe_load(path.read_text())
+        data = yaml.load(path.read_text(), Loader=_YamlLoader)  # a SafeLoader
     except OSError as exc:
         raise _error(
             source, "(file)", f"cannot read it ({exc.strerror or exc}); check permissions"
