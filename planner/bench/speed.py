@@ -56,9 +56,9 @@ GROUPS = (
                                                   "/planner/body/paden_kahan.py", "pinocchio")),
     ("statics", "statics and torques", ("/planner/body/statics.py", "/planner/body/torques.py",
                                          "/planner/body/stability.py")),
-    ("terrain", "terrain queries", ("/planner/world/terrain.py", "/planner/world/heightfield.py")),
+    ("terrain", "terrain queries", ("/planner/world/terrain", "/planner/world/heightfield.py")),
     ("links", "leg links and rolling feet", ("/planner/body/links.py", "/planner/body/rolling.py")),
-    ("check", "check (validate)", ("/planner/planfile/validate.py",)),
+    ("check", "check (validate)", ("/planner/planfile/validate",)),
     ("other", "other", ()),
 )  # fmt: skip
 

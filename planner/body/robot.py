@@ -299,6 +299,34 @@ def load_robot(name_or_path: str | Path, foot_radius_m: float | None = None) -> 
     pin.forwardKinematics(model, data, q0)
     pin.updateFramePlacements(model, data)
 
+    legs = _legs_of(path, model, data)
+    radius, foot_source = _foot_spheres(path, root, model, q0, legs, foot_radius_m)
+    box, source = _body_box(path, root, model, legs)
+
+    inertia = model.inertias[1]
+    robot = Robot(
+        name=name,
+        urdf_path=path,
+        model=model,
+        legs=legs,
+        foot_radius_m=float(radius),
+        foot_radius_source=foot_source,
+        body_box_B=box,
+        body_box_source=source,
+        total_mass_kg=float(sum(inert.mass for inert in model.inertias)),
+        body_mass_kg=float(inertia.mass),
+        body_com_B=np.asarray(inertia.lever).copy(),
+    )
+    finalize_robot(robot)
+    return robot
+
+
+def _legs_of(path: Path, model: pin.Model, data: pin.Data) -> list[Leg]:
+    """The four legs (3 revolute joints each) at the neutral configuration, in leg order.
+
+    Axes, joint points and feet in the body frame; one hip per quadrant (front/hind x
+    left/right) names each leg.
+    """
     chains = _find_legs(path, model)
     legs: list[Leg] = []
     for chain in chains:
@@ -338,7 +366,18 @@ def load_robot(name_or_path: str | Path, foot_radius_m: float | None = None) -> 
     for leg, slot in zip(legs, slots, strict=True):
         leg.index, leg.name = slot, LEG_NAMES[slot]
     legs.sort(key=lambda leg: leg.index)
+    return legs
 
+
+def _foot_spheres(
+    path: Path,
+    root: ET.Element,
+    model: pin.Model,
+    q0: np.ndarray,
+    legs: list[Leg],
+    foot_radius_m: float | None,
+) -> tuple[float, str]:
+    """The foot radius [m] and its source; each leg's foot moved to its sphere's centre."""
     # foot spheres: a sphere collision on the foot's link, its centre the foot point
     # (a frame is added where the sphere sits off the link's origin); none: a derived radius
     spheres = [_foot_sphere(root, model, model.getFrameId(leg.foot_frame), path) for leg in legs]
@@ -359,7 +398,16 @@ def load_robot(name_or_path: str | Path, foot_radius_m: float | None = None) -> 
         shank_m = min(float(np.linalg.norm(leg.foot_B0 - leg.points_B[2])) for leg in legs)
         radius = FOOT_RADIUS_FRACTION * shank_m
         foot_source = f"{FOOT_RADIUS_FRACTION:g} x the shank length (no sphere foot in the URDF)"
+    return radius, foot_source
 
+
+def _body_box(
+    path: Path, root: ET.Element, model: pin.Model, legs: list[Leg]
+) -> tuple[np.ndarray, str]:
+    """The body box P (paper, section 4.2): [min, max] corners in the body frame, its source.
+
+    The root link's collision boxes, else a box around the hips.
+    """
     root_link = model.frames[2].name if len(model.frames) > 2 else ""
     root_link = next(
         (f.name for f in model.frames if f.parentJoint == 1 and f.type == pin.FrameType.BODY),
@@ -383,20 +431,4 @@ def load_robot(name_or_path: str | Path, foot_radius_m: float | None = None) -> 
         hi = hips.max(axis=0) + [0.05, 0.02, 0.05]
         box = np.array([lo, hi])
         source = "estimated from the hip positions (no collision box on the root link)"
-
-    inertia = model.inertias[1]
-    robot = Robot(
-        name=name,
-        urdf_path=path,
-        model=model,
-        legs=legs,
-        foot_radius_m=float(radius),
-        foot_radius_source=foot_source,
-        body_box_B=box,
-        body_box_source=source,
-        total_mass_kg=float(sum(inert.mass for inert in model.inertias)),
-        body_mass_kg=float(inertia.mass),
-        body_com_B=np.asarray(inertia.lever).copy(),
-    )
-    finalize_robot(robot)
-    return robot
+    return box, source

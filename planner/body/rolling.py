@@ -21,7 +21,7 @@ and the simulator: the tangential part of the centre's travel minus the rolling,
     sliding = P_n (delta_c - rho w x n),   P_n = I - n n^T,
 
 per pair of consecutive samples in :func:`planner.planfile.validate.check_plan` (``stance_slip``,
-rotations from Pinocchio) and integrated over time in :class:`planner.sim.simulate.Monitor`
+rotations from Pinocchio) and integrated over time in :class:`planner.sim.monitor.Monitor`
 (velocity of the sphere's material point at the contact). The normal part is whether the
 sphere still rests on the terrain (``foot_on_terrain``).
 

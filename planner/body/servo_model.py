@@ -1,6 +1,6 @@
 """Joint servos of the simulated robot, scaled from LittleDog's by dynamic similarity (sec. 10).
 
-LittleDog's servos in MuJoCo (:class:`planner.sim.simulate.SimSettings`: stiffness 20 N m/rad,
+LittleDog's servos in MuJoCo (:class:`planner.sim.model.SimSettings`: stiffness 20 N m/rad,
 damping 0.25 N m s/rad, reflected rotor inertia 5e-4 kg m^2, joint friction 0.01 N m s/rad)
 were checked against its walks (open loop and feedback on the named and generated courses).
 Another robot gets the dynamically similar values. With M its total mass and L its mean

@@ -172,40 +172,15 @@ def _cmd_plan(args) -> int:
     from planner.body.robot import load_robot
     from planner.core.interrupts import Interrupts
     from planner.core.outputs import check_file
-    from planner.planning.settings import effective
-    from planner.planning.walk import PLANNERS, check_endpoints, plan_walk
+    from planner.planning.walk import plan_walk
     from planner.world.terrain import load_terrain
 
     robot, terrain = load_robot(args.robot), load_terrain(args.terrain)
     user = _user_settings(args, robot)
     settings = replace(user.local, theta=replace(user.local.theta, jit=args.jit))
     if args.print_config:
-        local = PLANNERS[args.planner](robot, terrain, mu=user.mu, settings=settings)
-        for name, value in effective(local, user.seed).items():
-            if value is None:
-                shown = "none"
-            elif isinstance(value, list):
-                shown = ",".join(value)
-            else:
-                shown = value if isinstance(value, str) else f"{value:g}"
-            print(f"{name}: {shown}")
-        return 0
-    if args.goal is None and str(terrain.name).startswith(("gen:", "feat:")):
-        from planner.world.course_gen import course_goal_xy
-
-        goal = course_goal_xy(terrain.spec)  # a generated course: walk to its end
-        print(f"goal: {goal[0]:g},{goal[1]:g} (the end of {terrain.name}; --goal to change)")
-    elif args.goal is None:
-        raise InputError("--goal: required; give X,Y in metres (e.g. --goal 2.2,0)")
-    else:
-        goal = _parse_xy(args.goal, "goal")
-    start = _parse_xy(args.start, "start")
-    if math.hypot(goal[0] - start[0], goal[1] - start[1]) < 1e-3:
-        raise InputError(
-            f"--goal {goal[0]:g},{goal[1]:g}: the start itself (--start {start[0]:g},"
-            f"{start[1]:g}); give a goal at least 1 mm away from it"
-        )
-    check_endpoints(robot, terrain, start, goal, ("--start", "--goal"))
+        return _print_config(args, robot, terrain, user, settings)
+    goal, start = _plan_endpoints(args, robot, terrain)
     # the plan file is mostly its terrain grid: 5 mm cells over the walk and 0.3 m around
     cells = (abs(goal[0] - start[0]) + 1.3) * (abs(goal[1] - start[1]) + 1.0) / 0.005**2
     check_file(args.out, "--out", size_b=20 * cells + 2**20)
@@ -267,6 +242,46 @@ def _cmd_plan(args) -> int:
     if stop.exit_code is not None:
         return stop.exit_code
     return 0 if o["reached_goal"] else 1
+
+
+def _print_config(args, robot, terrain, user, settings) -> int:
+    """``plan --print-config``: every setting in effect, one ``name: value`` a line."""
+    from planner.planning.settings import effective
+    from planner.planning.walk import PLANNERS
+
+    local = PLANNERS[args.planner](robot, terrain, mu=user.mu, settings=settings)
+    for name, value in effective(local, user.seed).items():
+        if value is None:
+            shown = "none"
+        elif isinstance(value, list):
+            shown = ",".join(value)
+        else:
+            shown = value if isinstance(value, str) else f"{value:g}"
+        print(f"{name}: {shown}")
+    return 0
+
+
+def _plan_endpoints(args, robot, terrain) -> tuple[tuple[float, float], tuple[float, float]]:
+    """The plan's goal (a generated course's end without ``--goal``) and start, checked."""
+    from planner.planning.walk import check_endpoints
+
+    if args.goal is None and str(terrain.name).startswith(("gen:", "feat:")):
+        from planner.world.course_gen import course_goal_xy
+
+        goal = course_goal_xy(terrain.spec)  # a generated course: walk to its end
+        print(f"goal: {goal[0]:g},{goal[1]:g} (the end of {terrain.name}; --goal to change)")
+    elif args.goal is None:
+        raise InputError("--goal: required; give X,Y in metres (e.g. --goal 2.2,0)")
+    else:
+        goal = _parse_xy(args.goal, "goal")
+    start = _parse_xy(args.start, "start")
+    if math.hypot(goal[0] - start[0], goal[1] - start[1]) < 1e-3:
+        raise InputError(
+            f"--goal {goal[0]:g},{goal[1]:g}: the start itself (--start {start[0]:g},"
+            f"{start[1]:g}); give a goal at least 1 mm away from it"
+        )
+    check_endpoints(robot, terrain, start, goal, ("--start", "--goal"))
+    return goal, start
 
 
 def _cmd_demo(args) -> int:

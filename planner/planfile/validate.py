@@ -70,6 +70,10 @@ with its vertical faces: sampled on a 1 mm grid around each point, face position
 by bisection between grid nodes whose heights jump (accurate to ~3e-5 m). Exact tests
 run only where a cheap bound (terrain maxima over 2 cm tiles) does not already clear a
 sample, which keeps 2000 samples at a few seconds.
+
+The report and tolerances are in :mod:`planner.planfile.validate_report`, the sharp-surface
+distances and bounds in :mod:`planner.planfile.validate_surface`, the body, leg and swing
+clearance checks in :mod:`planner.planfile.validate_clearance`.
 """
 
 from __future__ import annotations
@@ -77,10 +81,8 @@ from __future__ import annotations
 import math
 import sys
 import time
-from collections import Counter
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO, TYPE_CHECKING
+from typing import IO
 
 import numpy as np
 import pinocchio as pin
@@ -93,20 +95,26 @@ from planner.body.contact import (
     foot_centre_from_contact,
     unique_contact_points,
 )
-from planner.body.links import LegLinks
-from planner.body.robot import LEG_NAMES
 from planner.body.rolling import sliding
 from planner.body.stability import support_margin_m
 from planner.body.torques import TorqueCheck
 from planner.core.errors import PlannerError
 from planner.core.units import GRAVITY_M_S2
-from planner.motion.interpolate import BETWEEN_SAMPLES_RAD, BETWEEN_STEP_RAD, between_q
 from planner.planfile.loader import structure_flaws
 from planner.planfile.plan import Plan
-
-if TYPE_CHECKING:
-    from planner.body.robot import Robot
-    from planner.world.terrain import Terrain
+from planner.planfile.validate_clearance import _ClearanceChecks
+from planner.planfile.validate_report import (
+    CheckReport,
+    CheckTolerances,
+    Violation,
+    _leg,
+    _mm,
+)
+from planner.planfile.validate_surface import (
+    _smoothing_width_m,
+    _TileMax,
+    sharp_surface_distance,
+)
 
 __all__ = [
     "CheckReport",
@@ -119,325 +127,10 @@ __all__ = [
 ]
 
 _Array = NDArray[np.float64]
-_LEG_EXACT_M = 0.004  # leg clearances are exact below this [m]; above, a lower bound
-
-
-@dataclass(frozen=True)
-class CheckTolerances:
-    """Tolerances of :func:`check_plan` (SI units: m, rad, N).
-
-    Attributes
-    ----------
-    fk_m : keyframe FK vs stored feet.
-    joint_rad : excursion past a joint limit.
-    slip_m : sliding of a foot in contact between consecutive samples (travel minus rolling).
-    on_terrain_m : ``|f_T|`` of a contact point on the smooth terrain.
-    sharp_surface_m : distance of a contact point from the sharp surface; None: the
-        terrain's largest smoothing width + 1 mm (6 mm by default).
-    body_clearance_m : least height of the body box above the sharp terrain.
-    swing_penetration_m : allowed penetration of a swing foot sphere into the sharp terrain.
-    leg_clearance_m : least distance of a thigh or shank capsule to the sharp terrain.
-    torque_rel : a joint torque may exceed its effort limit by this fraction.
-    force_balance_rel : keyframe force/moment residual, as a fraction of m g.
-    min_contacts : feet that must be down at every sample.
-    balance_tol_N : margin the exact statics test must exceed; None: its default.
-    body_grid_m : spacing of the points sampled on the body box's lower faces.
-    surface_step_m : grid step of the sharp-surface distance search.
-
-    """
-
-    fk_m: float = 1e-6
-    joint_rad: float = 1e-9
-    slip_m: float = 1e-6
-    on_terrain_m: float = 1e-4
-    sharp_surface_m: float | None = None
-    body_clearance_m: float = 0.0
-    swing_penetration_m: float = 1e-4
-    leg_clearance_m: float = 0.0
-    torque_rel: float = 1e-6
-    force_balance_rel: float = 1e-6
-    min_contacts: int = 3
-    balance_tol_N: float | None = None
-    body_grid_m: float = 0.005
-    surface_step_m: float = 1e-3
-
-
-@dataclass(frozen=True)
-class Violation:
-    """One failed check.
-
-    ``kind`` (see the module docstring), ``where`` ("sample 17" / "keyframe 3" / "robot",
-    0-based indices), the 1-based ``leg`` (or None), the offending ``value`` and its
-    ``limit`` (SI units), and a one-line ``message``.
-    """
-
-    kind: str
-    where: str
-    leg: int | None
-    value: float
-    limit: float
-    message: str
-
-    def __str__(self) -> str:
-        return f"{self.where}: {self.kind}: {self.message}"
-
-
-@dataclass
-class CheckReport:
-    """Outcome of :func:`check_plan`: the violations and a few summary figures.
-
-    ``min_body_clearance_m``: least height of the body box over the sharp terrain (exact
-    at the samples within 1 cm of the ground and the 8 closest, elsewhere the lowest
-    vertex over the highest terrain node under the body);
-    ``min_swing_clearance_m``: least distance of a swing sphere to the sharp surface
-    (negative: penetration; a lower bound where the foot is far up); ``min_leg_clearance_m``:
-    least distance of a thigh or shank capsule to the sharp terrain (exact below 4 mm, a
-    lower bound above); ``max_torque_ratio``: largest joint torque over its effort limit
-    (with the least demanding forces); ``min_balance_margin_N``:
-    least force margin of the statics test; ``min_tip_margin_m``: least horizontal
-    distance of the COM inside a three-leg support triangle (a figure, not a test: the
-    planner keeps :data:`planner.body.stability.PATH_BALANCE_MARGIN_M`);
-    ``min_sway_stiffness_N_per_m``: least sway stiffness of a three-leg stance where it
-    begins, on the robot's servos with the commanded feed-forward (a figure:
-    :mod:`planner.body.stiffness`; the planner keeps its bound); ``max_slip_m``:
-    largest stance-foot sliding between samples (travel minus rolling). NaN when there was
-    nothing to measure.
-    """
-
-    violations: list[Violation] = field(default_factory=list)
-    n_samples: int = 0
-    n_keyframes: int = 0
-    min_body_clearance_m: float = math.nan
-    min_swing_clearance_m: float = math.nan
-    min_leg_clearance_m: float = math.nan
-    min_balance_margin_N: float = math.nan
-    min_tip_margin_m: float = math.nan
-    max_torque_ratio: float = math.nan
-    min_sway_stiffness_N_per_m: float = math.nan
-    max_slip_m: float = math.nan
-    elapsed_s: float = 0.0
-    tolerances: CheckTolerances = field(default_factory=CheckTolerances)
-    structure_only: bool = False  # a malformed plan: the other checks were skipped
-
-    @property
-    def ok(self) -> bool:
-        """True when no check failed."""
-        return not self.violations
-
-    def by_kind(self) -> dict[str, int]:
-        """Number of violations of each kind."""
-        return dict(Counter(v.kind for v in self.violations))
-
-    def summary(self) -> str:
-        """One line: verdict, counts per kind, and the summary figures."""
-        figs = (
-            f"min body clearance {_mm(self.min_body_clearance_m)}, min swing clearance "
-            f"{_mm(self.min_swing_clearance_m)}, min leg clearance "
-            f"{_mm(self.min_leg_clearance_m)}, min balance margin "
-            f"{self.min_balance_margin_N:.3g} N, min three-leg tip margin "
-            f"{_mm(self.min_tip_margin_m)}, max joint torque "
-            f"{100 * self.max_torque_ratio:.0f} % of its limit, min three-leg sway "
-            f"stiffness {self.min_sway_stiffness_N_per_m:.0f} N/m, max stance slip "
-            f"{_mm(self.max_slip_m)}"
-        )
-        head = f"checked {self.n_samples} samples and {self.n_keyframes} keyframes"
-        if self.ok:
-            return f"{head}: OK ({figs}; {self.elapsed_s:.2f} s)"
-        kinds = ", ".join(f"{k} {n}" for k, n in sorted(self.by_kind().items()))
-        if self.structure_only:
-            return (
-                f"{head}: FAILED, {len(self.violations)} violations ({kinds}); no motion a "
-                f"robot could execute, so the other checks were skipped ({self.elapsed_s:.2f} s)"
-            )
-        return (
-            f"{head}: FAILED, {len(self.violations)} violations ({kinds}) ({figs}; "
-            f"{self.elapsed_s:.2f} s)"
-        )
-
-
-def _mm(x: float) -> str:
-    return "n/a" if not math.isfinite(x) else f"{1e3 * x:.3g} mm"
-
-
-def _leg(i: int) -> str:
-    return f"leg {i + 1} ({LEG_NAMES[i]})"
-
-
-# --------------------------------------------------------------------------- geometry
-def _rotations_from_quats(q_xyzw: _Array) -> _Array:
-    """(N, 3, 3) rotation matrices of (N, 4) unit quaternions (x, y, z, w)."""
-    q = q_xyzw / np.linalg.norm(q_xyzw, axis=1, keepdims=True)
-    x, y, z, w = q.T
-    return np.stack(
-        [
-            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
-            np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
-            np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
-        ],
-        axis=1,
-    )
-
-
-def sharp_surface_distance(
-    terrain: Terrain, points_W: _Array, radius_m: float, step_m: float = 1e-3
-) -> _Array:
-    """Signed Euclidean distance [m] of points to the sharp terrain surface.
-
-    The surface is the graph of ``terrain.height_sharp`` closed by vertical faces at its
-    jumps. It is sampled on a square grid of ``step_m`` covering ``radius_m`` around each
-    point; where two neighbouring nodes differ by more than ``2 step_m`` the face between
-    them is located by bisection. The sign is that of ``p_z - height_sharp(p_x, p_y)``
-    (negative: under the surface). The magnitude is at most the vertical gap and is
-    clipped to ``radius_m`` (nothing nearer). Error ~ step^2 / (4 d) on smooth parts
-    (2.5e-5 m at 1 mm and d = 1 cm); faces are exact to step / 4096.
-
-    Parameters
-    ----------
-    terrain : Terrain
-        Provides ``height_sharp``.
-    points_W : array (N, 3)
-        Points [m], world frame.
-    radius_m : float
-        Search radius [m].
-    step_m : float
-        Grid step [m].
-
-    Returns
-    -------
-    ndarray (N,)
-        Signed distances [m].
-
-    """
-    p = np.asarray(points_W, dtype=float).reshape(-1, 3)
-    if len(p) == 0:
-        return np.zeros(0)
-    gap = p[:, 2] - np.asarray(terrain.height_sharp(p[:, 0], p[:, 1]), dtype=float).reshape(-1)
-    k = int(math.ceil(radius_m / step_m))
-    u = step_m * np.arange(-k, k + 1)
-    m = len(u)
-    ux, uy = np.meshgrid(u, u)  # [iy, ix]
-    r2 = ux**2 + uy**2
-    best = np.minimum(np.abs(gap), radius_m)
-    chunk = max(1, 200_000 // (m * m))
-    jump = 2.0 * step_m
-    for a in range(0, len(p), chunk):
-        pc = p[a : a + chunk]
-        n = len(pc)
-        hx = pc[:, 0, None, None] + ux[None]
-        hy = pc[:, 1, None, None] + uy[None]
-        h = terrain.height_sharp_offsets(pc[:, 0], pc[:, 1], ux, uy).reshape(n, m, m)
-        d_graph = np.sqrt(r2[None] + (pc[:, 2, None, None] - h) ** 2)
-        d = d_graph.reshape(n, -1).min(axis=1)
-        for axis in (2, 1):  # faces between x-neighbours, then y-neighbours
-            h0 = h[:, :, :-1] if axis == 2 else h[:, :-1, :]
-            h1 = h[:, :, 1:] if axis == 2 else h[:, 1:, :]
-            sel = np.nonzero(np.abs(h1 - h0) > jump)
-            if not sel[0].size:
-                continue
-            ip, iy, ix = sel
-            xa, ya = hx[ip, iy, ix], hy[ip, iy, ix]
-            dx, dy = (step_m, 0.0) if axis == 2 else (0.0, step_m)
-            xb, yb = xa + dx, ya + dy
-            ha, hb = h0[sel], h1[sel]
-            for _ in range(12):
-                xm, ym = 0.5 * (xa + xb), 0.5 * (ya + yb)
-                hm = np.asarray(terrain.height_sharp(xm, ym), dtype=float).reshape(-1)
-                left = np.abs(hm - ha) > np.abs(hm - hb)  # the jump is in [a, m]
-                xb, yb, hb = np.where(left, xm, xb), np.where(left, ym, yb), np.where(left, hm, hb)
-                xa, ya, ha = np.where(left, xa, xm), np.where(left, ya, ym), np.where(left, ha, hm)
-            lo, hi = np.minimum(ha, hb), np.maximum(ha, hb)
-            z = pc[ip, 2]
-            dz = np.maximum(np.maximum(lo - z, z - hi), 0.0)
-            dface = np.sqrt(
-                (0.5 * (xa + xb) - pc[ip, 0]) ** 2 + (0.5 * (ya + yb) - pc[ip, 1]) ** 2 + dz**2
-            )
-            np.minimum.at(d, ip, dface)
-        best[a : a + n] = np.minimum(best[a : a + n], d)
-    return np.where(gap >= 0.0, 1.0, -1.0) * best
-
-
-class _TileMax:
-    """Upper bounds of the sharp terrain over rectangles, from lazily evaluated tiles.
-
-    The plane is cut into ``TILE_M`` square tiles; a tile's bound is the largest
-    ``height_sharp`` at its nodes (``NODE_M`` apart, borders included), evaluated once
-    when a query first touches it. ``max_in`` returns the largest bound over the tiles a
-    rectangle meets: the terrain's maximum there, up to features narrower than ``NODE_M``
-    and, on slopes, ``slope * NODE_M`` (callers subtract ``SLACK_M``). Used to skip the
-    exact tests far from the ground.
-    """
-
-    TILE_M = 0.02
-    NODE_M = 0.005
-    SLACK_M = 0.005
-
-    def __init__(self, terrain: Terrain):
-        self.terrain = terrain
-        self.tiles: dict[tuple[int, int], float] = {}
-
-    def max_in(self, boxes: _Array) -> _Array:
-        """Bound (K,) over rectangles (K, 4) ``[x0, x1, y0, y1]`` [m]."""
-        t = self.TILE_M
-        idx = np.column_stack(
-            [np.floor(boxes[:, 0] / t), np.floor(boxes[:, 1] / t),
-             np.floor(boxes[:, 2] / t), np.floor(boxes[:, 3] / t)]
-        ).astype(int)  # fmt: skip
-        ix0, iy0 = idx[:, 0].min(), idx[:, 2].min()
-        shape = (idx[:, 3].max() - iy0 + 1, idx[:, 1].max() - ix0 + 1)
-        need = np.zeros(shape, dtype=bool)
-        for a, b, c, d in idx:
-            need[c - iy0 : d - iy0 + 1, a - ix0 : b - ix0 + 1] = True
-        todo = [
-            (int(ix + ix0), int(iy + iy0))
-            for iy, ix in zip(*np.nonzero(need), strict=True)
-            if (int(ix + ix0), int(iy + iy0)) not in self.tiles
-        ]
-        if todo:
-            n = int(round(t / self.NODE_M)) + 1
-            u = np.linspace(0.0, t, n)
-            ux, uy = (g.ravel() for g in np.meshgrid(u, u))
-            tix = np.array(todo, dtype=float)
-            h = self.terrain.height_sharp(tix[:, :1] * t + ux[None], tix[:, 1:] * t + uy[None])
-            hmax = np.asarray(h, dtype=float).reshape(len(todo), -1).max(axis=1)
-            self.tiles.update(zip(todo, hmax.tolist(), strict=True))
-        grid = np.full(shape, -np.inf)
-        for iy, ix in zip(*np.nonzero(need), strict=True):
-            grid[iy, ix] = self.tiles[(int(ix + ix0), int(iy + iy0))]
-        return np.array([grid[c - iy0 : d - iy0 + 1, a - ix0 : b - ix0 + 1].max()
-                         for a, b, c, d in idx])  # fmt: skip
-
-
-def _body_points_B(robot: Robot, spacing_m: float) -> list[tuple[_Array, _Array]]:
-    """Faces of the body box P: (outward normal, (K, 3) points incl. edges) in body frame."""
-    lo, hi = robot.body_box_B
-    faces = []
-    for axis in range(3):
-        a, b = [j for j in range(3) if j != axis]
-        ua = np.linspace(lo[a], hi[a], max(2, int(math.ceil((hi[a] - lo[a]) / spacing_m)) + 1))
-        ub = np.linspace(lo[b], hi[b], max(2, int(math.ceil((hi[b] - lo[b]) / spacing_m)) + 1))
-        ga, gb = (g.ravel() for g in np.meshgrid(ua, ub))
-        for side, value in ((-1.0, lo[axis]), (1.0, hi[axis])):
-            pts = np.empty((len(ga), 3))
-            pts[:, axis], pts[:, a], pts[:, b] = value, ga, gb
-            normal = np.zeros(3)
-            normal[axis] = side
-            faces.append((normal, pts))
-    return faces
-
-
-def _smoothing_width_m(spec: dict) -> float:
-    """Largest ``smoothing_m`` of a terrain spec and its segments [m]."""
-    from planner.world.terrain import DEFAULT_SMOOTHING_M
-
-    widths = [float(spec.get("smoothing_m", DEFAULT_SMOOTHING_M))]
-    for seg in spec.get("segments", []) or []:
-        if isinstance(seg, dict) and "smoothing_m" in seg:
-            widths.append(float(seg["smoothing_m"]))
-    return max(widths)
 
 
 # --------------------------------------------------------------------------- the check
-class _Checker:
+class _Checker(_ClearanceChecks):
     """State shared by the checks of one plan."""
 
     def __init__(self, plan: Plan, tol: CheckTolerances):
@@ -597,17 +290,11 @@ class _Checker:
 
     # ---- samples --------------------------------------------------------------------
     def samples(self, report: CheckReport) -> None:
-        sm, tol, terrain, rho = self.plan.samples, self.tol, self.terrain, self.rho
+        sm, terrain, rho = self.plan.samples, self.terrain, self.rho
         n = len(sm)
         if n == 0:
             return
-        centres = np.empty((n, 4, 3))
-        coms = np.empty((n, 3))
-        foot_rot = np.empty((n, 4, 3, 3))
-        for k in range(n):
-            self.joint_limits(sm.q[k], f"sample {k}")
-            centres[k], coms[k] = self.kinematics(sm.q[k])
-            foot_rot[k] = [self.data.oMf[i].rotation for i in self.foot_ids]
+        centres, coms, foot_rot = self._sample_kinematics()
         down = sm.contact
 
         # contact points (from FK) of the feet in contact, and how far off the terrain
@@ -616,6 +303,37 @@ class _Checker:
         if down.any():
             contacts[down], miss[down] = unique_contact_points(terrain, centres[down], rho)
 
+        self._contact_count()
+        self._stance_slip(centres, contacts, foot_rot, report)
+        self._feet_on_terrain(contacts, miss)
+
+        self.body_clearance(report)
+        self.leg_clearance(report)
+        self.swing_clearance(centres, report)
+        self.balance(contacts, coms, report)
+        self.joint_torques(contacts, report)
+        _sway(self, report)
+
+    def _sample_kinematics(self) -> tuple[_Array, _Array, _Array]:
+        """Foot sphere centres (N, 4, 3), COMs (N, 3) and foot frame rotations (N, 4, 3, 3).
+
+        Checks each sample's joint limits on the way (``joint_limits``).
+        """
+        sm = self.plan.samples
+        n = len(sm)
+        centres = np.empty((n, 4, 3))
+        coms = np.empty((n, 3))
+        foot_rot = np.empty((n, 4, 3, 3))
+        for k in range(n):
+            self.joint_limits(sm.q[k], f"sample {k}")
+            centres[k], coms[k] = self.kinematics(sm.q[k])
+            foot_rot[k] = [self.data.oMf[i].rotation for i in self.foot_ids]
+        return centres, coms, foot_rot
+
+    def _contact_count(self) -> None:
+        """At least ``min_contacts`` feet down at every sample (``contact_count``)."""
+        sm, tol = self.plan.samples, self.tol
+        down = sm.contact
         n_down = down.sum(axis=1)
         for k in np.flatnonzero(n_down < tol.min_contacts):
             legs = ", ".join(str(i + 1) for i in np.flatnonzero(down[k])) or "none"
@@ -629,7 +347,16 @@ class _Checker:
                 f"{tol.min_contacts} must be down",
             )
 
-        # stance sliding between consecutive samples: travel minus rolling (planner.body.rolling)
+    def _stance_slip(
+        self, centres: _Array, contacts: _Array, foot_rot: _Array, report: CheckReport
+    ) -> None:
+        """Stance sliding between consecutive samples: travel minus rolling (``stance_slip``).
+
+        The rolling of a rigid sphere foot turned with the shank (:mod:`planner.body.rolling`).
+        """
+        sm, tol, rho = self.plan.samples, self.tol, self.rho
+        n = len(sm)
+        down = sm.contact
         if n > 1:
             both = down[1:] & down[:-1]
             moved = np.zeros((n - 1, 4))
@@ -656,7 +383,14 @@ class _Checker:
                     f"minus rolling; limit {_mm(tol.slip_m)})",
                 )
 
-        # feet on the smooth terrain, and near the sharp one
+    def _feet_on_terrain(self, contacts: _Array, miss: _Array) -> None:
+        """Feet on the smooth terrain, and near the sharp one (section 4.4).
+
+        ``foot_on_terrain``: ``miss``, a contact point's distance off the smooth surface;
+        ``foot_off_sharp_surface``: farther from the sharp one than the smoothing width.
+        """
+        sm, tol, terrain = self.plan.samples, self.tol, self.terrain
+        down = sm.contact
         ks, ls = np.nonzero(down)
         if len(ks):
             pts = contacts[ks, ls]
@@ -691,229 +425,6 @@ class _Checker:
                             f"terrain surface (limit {_mm(sharp_tol)}: smoothing width "
                             f"{_mm(smooth_w)} + 1 mm)",
                         )
-
-        self.body_clearance(report)
-        self.leg_clearance(report)
-        self.swing_clearance(centres, report)
-        self.balance(contacts, coms, report)
-        self.joint_torques(contacts, report)
-        _sway(self, report)
-
-    def body_clearance(self, report: CheckReport) -> None:
-        """Body box P vs the sharp terrain: a tile bound first, exact points where close."""
-        sm, tol = self.plan.samples, self.tol
-        rot = _rotations_from_quats(sm.q[:, 3:7])
-        verts = np.einsum("nij,kj->nki", rot, self.robot.body_vertices_B) + sm.q[:, None, :3]
-        pad = _TileMax.NODE_M
-        boxes = np.column_stack(
-            [
-                verts[:, :, 0].min(axis=1) - pad,
-                verts[:, :, 0].max(axis=1) + pad,
-                verts[:, :, 1].min(axis=1) - pad,
-                verts[:, :, 1].max(axis=1) + pad,
-            ]
-        )
-        # lowest vertex over the highest terrain node under the footprint: a lower bound
-        bound = verts[:, :, 2].min(axis=1) - self.tiles.max_in(boxes) - _TileMax.SLACK_M
-        faces = _body_points_B(self.robot, tol.body_grid_m)
-        # exact points for the samples within 1 cm of touching, and the 8 closest
-        todo = np.union1d(
-            np.flatnonzero(bound < tol.body_clearance_m + 0.01), np.argsort(bound)[:8]
-        )
-        exact = np.full(len(sm), np.inf)
-        for a in range(0, len(todo), 32):
-            pts, owner = [], []
-            for k in todo[a : a + 32]:
-                for normal, p_b in faces:
-                    if (rot[k] @ normal)[2] < -1e-9:
-                        pts.append(p_b @ rot[k].T + sm.q[k, :3])
-                        owner.append(np.full(len(p_b), k))
-            pts_w = np.concatenate(pts)
-            own = np.concatenate(owner)
-            h = np.asarray(self.terrain.height_sharp(pts_w[:, 0], pts_w[:, 1])).reshape(-1)
-            np.minimum.at(exact, own, pts_w[:, 2] - h)
-        rest = np.setdiff1d(np.arange(len(sm)), todo)
-        best = float(exact.min())
-        if len(rest):  # not measured exactly: lowest vertex over the tile maximum
-            best = min(best, float(bound[rest].min() + _TileMax.SLACK_M))
-        report.min_body_clearance_m = best
-        for k in np.flatnonzero(exact < tol.body_clearance_m):
-            self.add(
-                "body_clearance",
-                f"sample {k}",
-                None,
-                exact[k],
-                tol.body_clearance_m,
-                f"body box reaches {_mm(-exact[k])} below the sharp terrain (least clearance "
-                f"{_mm(tol.body_clearance_m)})",
-            )
-
-    def leg_clearance(self, report: CheckReport) -> None:
-        """Thigh and shank capsules vs the sharp terrain (``leg_clearance``).
-
-        At every sample, and between two samples where a joint moves more than
-        ``BETWEEN_SAMPLES_RAD`` (the executor interpolates the joints linearly: a knee
-        flipping between two clear samples can sweep its shank through the terrain), at
-        configurations ``BETWEEN_STEP_RAD`` apart.
-        """
-        sm, tol = self.plan.samples, self.tol
-        links = LegLinks(self.robot)
-        per = self._link_clearances(links, sm.q)
-        report.min_leg_clearance_m = float(per.min()) if per.size else math.nan
-        for k, c in zip(*np.nonzero(per < tol.leg_clearance_m), strict=True):
-            self._leg_violation(links, f"sample {k}", c, per[k, c])
-        for k in range(len(sm) - 1):
-            jump = float(np.max(np.abs(sm.q[k + 1, 7:] - sm.q[k, 7:])))
-            if jump <= BETWEEN_SAMPLES_RAD:
-                continue
-            m = int(math.ceil(jump / BETWEEN_STEP_RAD))
-            qs = np.array([between_q(sm.q[k], sm.q[k + 1], u) for u in np.arange(1, m) / m])
-            mid = self._link_clearances(links, qs).min(axis=0)
-            report.min_leg_clearance_m = min(report.min_leg_clearance_m, float(mid.min()))
-            for c in np.flatnonzero(mid < tol.leg_clearance_m):
-                self._leg_violation(links, f"sample {k}", c, mid[c], f" between it and {k + 1}")
-
-    def _leg_violation(self, links: LegLinks, where: str, c: int, value: float, extra="") -> None:
-        cap = links.capsules[c]
-        tol = self.tol.leg_clearance_m
-        self.add(
-            "leg_clearance",
-            where,
-            cap.leg,
-            value,
-            tol,
-            f"{_leg(cap.leg)} {cap.link} ({cap.urdf_link}) reaches {_mm(-value)} into "
-            f"the sharp terrain{extra} (least clearance {_mm(tol)})",
-        )
-
-    def _link_clearances(self, links: LegLinks, q_all: _Array) -> _Array:
-        """(N, capsules) clearances [m] of the leg links at configurations ``q_all``."""
-        from scipy.ndimage import maximum_filter
-
-        tol = self.tol
-        n, P = len(q_all), len(links.owner)
-        pts = np.empty((n, P, 3))
-        for k in range(n):
-            pts[k] = links.axis_points_W(q_all[k])
-        flat = pts.reshape(-1, 3)
-        rad = np.tile(links.radius, n)
-        # bound: highest terrain node within (radius + node) of a point, on a 5 mm raster
-        node = _TileMax.NODE_M
-        reach = float(links.radius.max()) + 2.0 * node
-        x0, y0 = flat[:, 0].min() - reach, flat[:, 1].min() - reach
-        nx = int(math.ceil((flat[:, 0].max() + reach - x0) / node)) + 1
-        ny = int(math.ceil((flat[:, 1].max() + reach - y0) / node)) + 1
-        gx, gy = np.meshgrid(x0 + node * np.arange(nx), y0 + node * np.arange(ny))
-        H = np.asarray(self.terrain.height_sharp(gx, gy), dtype=float).reshape(ny, nx)
-        M = maximum_filter(H, size=2 * int(math.ceil(reach / node)) + 1, mode="nearest")
-        ix = np.clip(np.rint((flat[:, 0] - x0) / node).astype(int), 0, nx - 1)
-        iy = np.clip(np.rint((flat[:, 1] - y0) / node).astype(int), 0, ny - 1)
-        clear = flat[:, 2] - rad - M[iy, ix] - _TileMax.SLACK_M  # a lower bound
-        near = np.flatnonzero(clear < tol.leg_clearance_m + _LEG_EXACT_M)
-        if len(near):
-            search = float(rad[near].max()) + tol.leg_clearance_m + _LEG_EXACT_M + 2e-3
-            d = sharp_surface_distance(self.terrain, flat[near], search, tol.surface_step_m)
-            # a distance clipped at the search radius is only known to be at least that
-            clear[near] = np.where(np.abs(d) < search, d - rad[near], search - rad[near])
-        per = np.full((n, len(links.capsules)), np.inf)
-        owner = np.tile(links.owner, n)
-        sample = np.repeat(np.arange(n), P)
-        np.minimum.at(per, (sample, owner), clear)
-        # refine along the axis around the closest point of the capsules near the limit
-        for k, c in zip(*np.nonzero(per < tol.leg_clearance_m + 1e-3), strict=True):
-            per[k, c] = min(per[k, c], self._capsule_clearance(links, q_all[k], c))
-        return per
-
-    def _capsule_clearance(self, links: LegLinks, q: _Array, c: int) -> float:
-        """Clearance of capsule c at q from points 0.2 mm apart along its whole axis."""
-        cap = links.capsules[c]
-        a, b = (s[c] for s in links.segments_W(q))
-        u = np.linspace(0.0, 1.0, max(2, int(math.ceil(cap.length_m / 2e-4)) + 1))[:, None]
-        p = (1.0 - u) * a + u * b
-        gap = p[:, 2] - np.asarray(self.terrain.height_sharp(p[:, 0], p[:, 1])).reshape(-1)
-        search = cap.radius_m + self.tol.leg_clearance_m + _LEG_EXACT_M + 2e-3
-        sel = np.flatnonzero(gap < search)
-        if not len(sel):
-            return float(gap.min() - cap.radius_m)
-        d = sharp_surface_distance(self.terrain, p[sel], search, self.tol.surface_step_m)
-        return float(min(d.min(), search) - cap.radius_m)
-
-    def swing_clearance(self, centres: _Array, report: CheckReport) -> None:
-        """Swing spheres vs the sharp terrain: a tile bound first, distances where close."""
-        sm, tol = self.plan.samples, self.tol
-        ks, ls = np.nonzero(~sm.contact)
-        if not len(ks):
-            return
-        clear = self._sphere_clearances(centres[ks, ls])
-        report.min_swing_clearance_m = float(clear.min())
-        for j in np.flatnonzero(clear < -tol.swing_penetration_m):
-            self._swing_violation(ks[j], ls[j], clear[j])
-        self._swing_between_samples(centres, report)
-
-    def _sphere_clearances(self, c: _Array) -> _Array:
-        """(N,) clearances [m] of foot spheres centred at ``c`` (N, 3) over the sharp terrain.
-
-        A tile bound first; the exact distance where it is under 1 mm.
-        """
-        rho = self.rho
-        reach = rho + _TileMax.NODE_M
-        boxes = np.column_stack(
-            [c[:, 0] - reach, c[:, 0] + reach, c[:, 1] - reach, c[:, 1] + reach]
-        )
-        clear = c[:, 2] - rho - self.tiles.max_in(boxes) - _TileMax.SLACK_M  # a lower bound
-        near = np.flatnonzero(clear < 1e-3)
-        if len(near):
-            d = sharp_surface_distance(self.terrain, c[near], rho + 1e-3, self.tol.surface_step_m)
-            clear[near] = d - rho
-        return clear
-
-    def _swing_violation(self, k: int, leg: int, clear: float, extra: str = "") -> None:
-        tol, rho = self.tol, self.rho
-        self.add(
-            "swing_clearance",
-            f"sample {k}",
-            leg,
-            -clear,
-            tol.swing_penetration_m,
-            f"{_leg(leg)} swing foot sphere penetrates the sharp terrain by "
-            f"{'at least ' if -clear >= rho else ''}{_mm(-clear)}{extra} (limit "
-            f"{_mm(tol.swing_penetration_m)})",
-        )
-
-    def _swing_between_samples(self, centres: _Array, report: CheckReport) -> None:
-        """Swing spheres between two samples where their leg's joints jump (``swing_clearance``).
-
-        Where a joint of the leg moves more than ``BETWEEN_SAMPLES_RAD``, at configurations
-        ``BETWEEN_STEP_RAD`` apart: the executor interpolates the joints linearly, and a
-        knee flipping between two clear samples can sweep the foot through the terrain (as
-        :meth:`leg_clearance` does the links). An interval that starts or ends with the
-        foot down may go as deep as the foot stands there (near an edge a foot on the
-        smooth terrain overlaps the sharp one a little, ``foot_off_sharp_surface``).
-        """
-        sm, tol = self.plan.samples, self.tol
-        where, swept = [], []  # (interval, leg) of each swept sphere centre
-        for k in range(len(sm) - 1):
-            legs = [i for i in range(4) if not (sm.contact[k, i] and sm.contact[k + 1, i])]
-            dq = np.abs(sm.q[k + 1, 7:] - sm.q[k, 7:]).reshape(4, 3).max(axis=1)
-            if not legs or float(dq[legs].max()) <= BETWEEN_SAMPLES_RAD:
-                continue
-            m = int(math.ceil(float(dq[legs].max()) / BETWEEN_STEP_RAD))
-            for u in np.arange(1, m) / m:
-                feet = self.kinematics(between_q(sm.q[k], sm.q[k + 1], u))[0]
-                where += [(k, i) for i in legs]
-                swept += [feet[i] for i in legs]
-        if not swept:
-            return
-        clear = self._sphere_clearances(np.array(swept))
-        report.min_swing_clearance_m = min(report.min_swing_clearance_m, float(clear.min()))
-        worst: dict[tuple[int, int], float] = {}
-        for j in np.flatnonzero(clear < -tol.swing_penetration_m):
-            worst[where[j]] = min(worst.get(where[j], 0.0), float(clear[j]))
-        for (k, i), value in sorted(worst.items()):
-            down = [kk for kk in (k, k + 1) if sm.contact[kk, i]]
-            ends = self._sphere_clearances(centres[down, i]) if down else np.zeros(0)
-            if value < min(float(ends.min(initial=0.0)), 0.0) - tol.swing_penetration_m:
-                self._swing_violation(k, i, value, f" between it and {k + 1}")
 
     def joint_torques(self, contacts: _Array, report: CheckReport) -> None:
         """Joint torques within the URDF effort limits (``joint_torque``)."""

@@ -9,7 +9,7 @@ the goal and when) live here once.
 
 Where the state comes from is a *source* (:class:`Source`): when planning, the walk's
 last state (:class:`PlannedStates`); when executing with feedback (8.3), the robot as
-measured (:class:`planner.sim.execution.MeasuredStates`). What a cycle does besides the
+measured (:class:`planner.sim.feedback.MeasuredStates`). What a cycle does besides the
 queue is a set of hooks (:class:`QueueCycle`): the soft planner traces back at dead ends
 (:mod:`planner.planning.soft`), feedback follows the precomputed plan's steps, corrects
 them (8.4) and executes them (:mod:`planner.sim.execution`). The recursive planner (8.5)
