@@ -1,4 +1,4 @@
-"""The time law of a planned path: when each of its samples is reached (issue 16).
+"""The time law of a planned path: when each of its samples is reached.
 
 The paper plans geometric paths (the leaves of section 7) and leaves their timing open; it
 asks only that the motion be slow enough to be quasi-static. A path here is the planner's
@@ -60,13 +60,13 @@ __all__ = [
 
 _Array = NDArray[np.float64]
 
-# every joint at most this share of its URDF velocity limit in an interval. Measured: flat
-# walks at the old uniform timing asked up to 0.92 of LittleDog's limits (HR knee, in
+# every joint at most this share of its URDF velocity limit in an interval. Chosen from
+# MuJoCo runs: flat walks asked up to 0.92 of LittleDog's limits (HR knee, in
 # swings) and MuJoCo tracked them; a joint-space swing that flipped a knee (3 rad) at 1.3x
 # lagged 92 degrees.
 JOINT_SPEED_FRACTION = 0.9
 # a swing searched in joint space passes an edge by millimetres, less than the servos' lag
-# at 0.9 of the limit (barrier75mm open loop: the joints lagged up to 14 degrees over the
+# at 0.9 of the limit (MuJoCo, open loop: the joints lagged up to 14 degrees over a
 # barrier and the foot caught it): its joints go at this share of their limits
 OVER_EDGE_SPEED_FRACTION = 0.4
 FOOT_SPEED_M_S = 1.0  # LittleDog's swing foot, peak [m/s] (x sqrt(s))
@@ -74,23 +74,21 @@ FOOT_ACCEL_M_S2 = 10.0  # ... its acceleration along the swing path [m/s^2]
 LANDING_SPEED_M_S = 0.5  # ... over the landing third of the intervals [m/s] (x sqrt(s))
 LANDING_FRACTION = 1.0 / 3.0  # the last third of a swing's intervals is its landing
 CARRIED_SHARE = 0.5  # a body move's inertia may use at most this share of a sample's
-# friction-cone margin (the climb of tests/test_climb.py slid and fell at 1.0 m/s^2
-# everywhere; its one body move whose margin halves below 1 m/s^2 is where it slid)
+# friction-cone margin (MuJoCo: a 10 cm climb at 1.0 m/s^2 everywhere slid and fell
+# where a body move's margin halves below 1 m/s^2)
 ACCEL_FLOOR_M_S2 = 0.05  # ... but a sample at the cone's edge may still move slowly
 MIN_INTERVAL_S = 1e-4  # no interval is shorter (repeated samples) [s]
-# the executed body is off its path by up to its speed x this [s] (x sqrt(s)) in MuJoCo:
-# barrier9cm's soft plan moved its body 3.3 cm back at up to 0.13 m/s with its underside
-# 16 mm over the barrier's edge; the body overshot by 15 mm and 4 degrees as it braked
-# (joints within 1.7 degrees of their set-points), its underside came down on the edge and
-# the robot fell, open loop and with feedback. Capping the speed at the clearance to spare
-# over 0.1 s of lag still fell, over 0.2 s held (5.6 cm off the end open loop), 0.3 s
-# reached (0.8 cm), as did the whole plan at time scale 1.5
+# the executed body is off its path by up to its speed x this [s] (x sqrt(s)) in MuJoCo.
+# Chosen from MuJoCo runs: a body moved 3.3 cm back at up to 0.13 m/s with its underside
+# 16 mm over a barrier's edge overshot by 15 mm and 4 degrees as it braked (joints within
+# 1.7 degrees of their set-points), came down on the edge and fell; capping the speed at
+# the clearance to spare over 0.1 s of lag still fell, over 0.2 s held, over 0.3 s reached
 BODY_LAG_S = 0.3
 LEAST_SPARE_M = 0.002  # a body already nearer than its margin still moves, slowly
 # the local planners' defaults (timed_settings), chosen from MuJoCo runs at time scale 1:
 BODY_SPEED_M_S = 0.25  # LittleDog's body moves, peak [m/s] (x sqrt(s) for another robot)
 # ... their acceleration bound [m/s^2], lower where the stance cannot carry it: the 10 cm
-# climb (tests/test_climb.py) slid and fell open loop at 1.0 and 1.5 (its body overshot a
+# climb slid and fell open loop at 1.0 and 1.5 (its body overshot a
 # fast move by 2 cm before a swing), and was executed as planned at 0.5
 BODY_ACCEL_M_S2 = 0.5
 SWING_TIME_S = 0.25  # LittleDog's least swing [s] (x sqrt(s))
@@ -236,8 +234,8 @@ def swing_durations_s(
     """Durations [s] of a swing's intervals (samples: the swing foot's points (N, 3)).
 
     The landing third of the intervals is capped at ``landing_speed_m_s``: landings with
-    speed turned the body in MuJoCo (gen:1 ended 10.9 cm off; slowing the landing third
-    3x brought it to 4.2 cm, slowing the lift-off third did not). A swing shorter than
+    speed turned the body in MuJoCo (a walk's end error: slowing the landing third 3x
+    more than halved it, slowing the lift-off third did not). A swing shorter than
     ``least_s`` is stretched to it.
     """
     if len(foot_W) < 2:

@@ -50,8 +50,8 @@ class BodyMoves:
 
         With ``swing_target_W`` the body also keeps ``leg``'s hip within reach of its next
         foothold (Theta2's swing-ready constraint). ``hint``: Theta2's last starting pose
-        (:meth:`planner.problems.theta2.Theta2.solve`). (Aiming at the hint's own pose when
-        the optimum's path fails was tried: barrier9cm's feedback run then stalled.)
+        (:meth:`planner.problems.theta2.Theta2.solve`). (The hint is not aimed at when the
+        optimum's path fails: a feedback run then stalled.)
         """
         support = tuple(i for i in range(4) if i != leg)
         rc = self.body_target(state, leg, shrink, swing_target_W, tau)
@@ -84,7 +84,7 @@ class BodyMoves:
         A body move is a deterministic function of its inputs (Theta2 starts from the
         state, not from its last solve), and the recursive planner (8.5) asks for the same
         failing one again with every ambition that keeps the body target (the plain pose
-        of the first foothold, the other footholds): barrier9cm spent 2-3 s per repeat.
+        of the first foothold, the other footholds), each repeat costing seconds.
         """
         arrays = [state.base_position_W, state.base_quaternion_xyzw, state.joints_rad,
                   state.feet_W]  # fmt: skip

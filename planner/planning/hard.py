@@ -25,11 +25,11 @@ inside the support triangle (on tau itself a crawl's three-leg COM is 16 mm from
 diagonal edge at best on flat ground, and MuJoCo tips over below about 20 mm,
 :mod:`planner.body.stability`); and its height is free within ``HEIGHT_BAND_M`` of the target's
 (Theta1's ``height_band_m``: pinned in 3-D, the COM stood 7 mm too high for a leg's reach
-on slope10). Lambda is still searched along tau, and the footholds, body paths (rolled
+on a slope). Lambda is still searched along tau, and the footholds, body paths (rolled
 feet, via poses) and swings are the soft planner's, with the recursive planner's refusal
 of landings the body cannot pass over next to a tall edge
-(:meth:`~planner.planning.local.LocalPlanner.blocks_passage`; without it hard stopped 130 cm
-short at barrier75mm).
+(:meth:`~planner.planning.local.LocalPlanner.blocks_passage`; without it hard stalls before a
+barrier).
 """
 
 from __future__ import annotations
@@ -56,11 +56,10 @@ SCAN_STEP = 0.125  # ... every this many strides
 MAX_SCREENED_SOLVES = 4  # Theta1 solves over the screened lambdas before Omega's bisection
 LATERAL_BAND_M = 0.03  # the COM target may sit this far beside tau
 # ... and this far in a second walk, planned when the first stalls within the time budget
-# (:meth:`HardPlanner.plan`). At 3 cm hard stalled 1.48 m short on barrier75mm (the front
-# feet stopped before the barrier, the hind ones caught up, no support triangle held a COM
-# within 3 cm of tau); at 4 cm it reaches, and so do the other named courses, but a 4 cm
-# step climb that 3 cm walks stalled (5 cm everywhere: stairs stalled); 5 cm only after
-# the dead end, or in the steps retraced before it, did not reach
+# (:meth:`HardPlanner.plan`). Chosen from planner runs: at 3 cm the front feet can stop
+# before a barrier, the hind ones catch up, and no support triangle holds a COM within
+# 3 cm of tau; 4 cm for the first walk stalls a step climb that 3 cm walks (5 cm: stairs);
+# 5 cm for the second walk did not reach
 WIDE_LATERAL_BAND_M = 0.04
 HEIGHT_BAND_M = 0.03  # the COM's height is free this far around the target's (Theta1)
 LATERAL_SPACING_M = 0.005  # offsets tried across the band this far apart

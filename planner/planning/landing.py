@@ -63,8 +63,8 @@ class Landing:
         their few centimetres of height and the open-loop walk fell.
 
         ``want`` (+1/-1): the branch to land on, chosen before (the precomputed plan's, 8.3:
-        from a state a few millimetres off, step10cm's feedback landed HR on the other
-        branch, and the plan's next steps found no body move from there); None when
+        from a state a few millimetres off, the choice made anew can land the leg on the
+        other branch, where the plan's next steps find no body move); None when
         ``touch`` is on it or the leg cannot reach its foot on it.
         """
         if want is not None:
@@ -119,7 +119,7 @@ class Landing:
         Beyond the paper: a hind foot a few centimetres before a barrier, its knee pointing
         ahead, lands clear, but the body cannot then move over it (the shank sweeps into
         the barrier), and its other knee branch is out of its joint limits there: the walk
-        is stuck (barrier75mm, recursive, 0.7 torque fraction). The leg is judged on its
+        is stuck. The leg is judged on its
         branch with the body ``PASSAGE_STRIDES`` of a stride further along, at its nominal
         height over the ground or up to ``PASSAGE_RAISES_M`` higher: blocked where at some
         such distance the leg reaches its foot and no height keeps its links (away from

@@ -1,4 +1,4 @@
-"""A swing that starts before its body move ends: the crawl's overlap (issue 16).
+"""A swing that starts before its body move ends: the crawl's overlap.
 
 The paper's step (figure 6, section 8.5) moves the body on four feet to a pose on the three
 other legs, and only then lifts the leg: the body rests during every swing. Yet the stance
@@ -264,8 +264,8 @@ def _max_sliding_m(planner: OverlapPlanner, path: list[State], leg: int) -> floa
     """The stance feet's largest sliding [m] between two samples of ``path`` (``check``'s).
 
     As ``check`` measures it: the terrain normal at each sample's own contact points (of
-    its sphere centres). With the first sample's normals for every pair, gen:44's relief
-    hid a 1.8 um slide under the 0.5 um budget, and check refused the plan (limit 1 um).
+    its sphere centres). With the first sample's normals for every pair, a relief can
+    hide a 1.8 um slide under the 0.5 um budget that check then refuses (limit 1 um).
     """
     kin, rho = planner.kin, planner.robot.foot_radius_m
     stance = [i for i in range(4) if i != leg]

@@ -268,9 +268,9 @@ class PathChecks:
         The executor interpolates the joints linearly between samples; where a joint moves
         more than ``BETWEEN_SAMPLES_RAD`` in one interval (a knee flipping at lift-off) the
         leg sweeps unchecked: its links are checked every ``BETWEEN_STEP_RAD`` there, and
-        may come no nearer the terrain than at the interval's two ends or 0. gen:5's plan
-        flipped a front knee 144 degrees between two clear samples; the shank passed 16 mm
-        through a stone between them, and the robot tipped over in MuJoCo.
+        may come no nearer the terrain than at the interval's two ends or 0. In MuJoCo a
+        front knee flipped 144 degrees between two clear samples put the shank 16 mm
+        through a stone between them, and the robot tipped over.
         ``bares`` (N, C): the links' clearance bounds at the samples (path_problem's); the
         configurations between samples are measured in one terrain query per set of legs
         swept.

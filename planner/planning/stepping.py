@@ -52,7 +52,7 @@ class Stepping:
         (Theta2's swing-ready constraint); if that is infeasible, the paper's plain Theta2.
         When that foothold fails (no landing-ready body pose, or no swing), up to
         ``OTHER_FOOTHOLDS`` others of the leg's reachable, safe region are tried
-        (:meth:`other_footholds`, issue 15). A failed placement keeps the body move
+        (:meth:`other_footholds`). A failed placement keeps the body move
         (``Step.moved``) of the first attempt: the robot stands safely on three legs there.
         A foothold that would leave the gait's next leg no stance to swing from
         (:meth:`leaves_no_support`) is tried after those around the leg's nominal
@@ -70,7 +70,7 @@ class Stepping:
         first = self._step_once(*args)
         if first.ok or not self.settings.follow_support or self._sink:
             return first
-        # back off (issue 13 item 5): the same step with the body lowered wherever a leg
+        # back off: the same step with the body lowered wherever a leg
         # would be stretched (:meth:`_reach_sink_m`); kept only when it succeeds
         self._sink = True
         try:

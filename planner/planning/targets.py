@@ -83,7 +83,7 @@ class Targets:
         feet lies within ``LEVEL_TOL_M`` of the plane of the four feet, and that plane is
         within ``LEVEL_SLOPE`` of horizontal. A long stride stretches the legs between the
         feet: on steps, stairs and slopes that left stances the servos could not hold on
-        three legs (step5cm and stairs stalled with 12 cm strides everywhere); on level
+        three legs (walks on them stalled with 12 cm strides everywhere); on level
         ground it halves the steps of a walk.
         """
         short = self.stride_m()
@@ -137,7 +137,7 @@ class Targets:
         max_lateral_m: float = CANDIDATE_LATERAL_M,
         keep=None,
     ) -> list[np.ndarray]:
-        """Footholds to try when the body cannot get ready for ``tried_W`` (issue 15 item 1).
+        """Footholds to try when the body cannot get ready for ``tried_W`` (8.2.2).
 
         :func:`planner.motion.footholds.foothold_candidates` within ``max_lateral_m`` of
         ``centre_W`` (default ``tried_W``) at the body pose the move aims for (COM at r_c*),

@@ -135,10 +135,10 @@ class Timing:
         (:meth:`planner.body.torques.TorqueCheck.commanded_ratio_map`, on the legs that hold
         the sample: the three of the next swing at a move's end) use at most
         ``CARRIED_SHARE`` of the headroom between the sample's ratio at rest and
-        ``TORQUE_FRACTION`` (counted as m g x the ratio): barrier9cm's recursive plan
-        braked a 3.8 cm sway at 0.5 m/s^2 onto a three-leg stance with the FL knee at 72 %
-        (88 % while braking), the knee saturated in MuJoCo and the robot fell; with that
-        move taking twice as long it held.
+        ``TORQUE_FRACTION`` (counted as m g x the ratio). Chosen from MuJoCo runs: a 3.8 cm
+        sway braked at 0.5 m/s^2 onto a three-leg stance with a knee at 72 % (88 % while
+        braking) saturated the knee and the robot fell; with that move taking twice as
+        long it held.
         >= 0: the stance carries the motion.
         """
         from planner.body.stability import tip_margin_m

@@ -30,14 +30,14 @@ __all__ = ["blend_in", "correct_cycle", "run_corrected", "shift_body"]
 _Array = NDArray[np.float64]
 
 # a corrected swing sample whose IK joints leave the plan's by more than this [rad] keeps
-# the plan's (step10cm's recursive plan: HR's corrected knee 66 degrees off, the foot on
-# the step edge, a fall)
+# the plan's (8.4; chosen from MuJoCo runs: a corrected knee 66 degrees off the plan's put
+# the foot on a step edge and the robot fell)
 SWING_JUMP_RAD = 0.35
 # a corrected cycle whose feet leave their legs' reach (a stance foot measured a few
-# millimetres off a plan that has the leg stretched: barrier9cm's recursive plan, HR at its
-# reach limit) has its body moved toward them by the worst sample's miss, up to this far
-# in all [m], in at most REACH_SHIFTS rounds (correct_cycle); the gates of
-# _follow_corrected (balance, leg links, path checks) judge the shifted samples
+# millimetres off a plan that has the leg stretched to its reach limit) has its body moved
+# toward them by the worst sample's miss, up to this far in all [m], in at most
+# REACH_SHIFTS rounds (correct_cycle); the gates of _follow_corrected (balance, leg links,
+# path checks) judge the shifted samples
 REACH_SHIFT_M = 0.01
 REACH_SHIFTS = 3
 
@@ -59,7 +59,7 @@ def correct_cycle(
     corrected ones is spread over the cycle's four-feet phase (until the first lift-off).
     The base starts at its measured pose and reaches the plan's (shifted by the feet's
     mean offset) by the end of that four-feet phase: a plan's body attitude 16 degrees
-    from the measured one (gen:12:0.6) is turned to, not commanded at once. Where feet
+    from the measured one is turned to, not commanded at once. Where feet
     then leave their legs' reach, the body is moved toward them by one offset for the
     cycle (at most ``REACH_SHIFT_M``), taken on over the same phase.
     Returns (corrected q (n, 19), IK misses: legs out of reach summed over samples).
@@ -146,7 +146,7 @@ def _corrected_legs(kin, p: _Array, R: _Array, targets_W: _Array, ref: _Array, s
 
     Each foot's IK on the plan sample's own knee branch: a leg the plan landed on its
     other knee beside an edge (LocalPlanner._other_knee_landing) keeps it; the leg's
-    default branch put barrier75mm's FR shank 33 mm into the barrier. A miss is the
+    default branch can put its shank into the edge (33 mm deep in MuJoCo). A miss is the
     target less the closest reachable foot centre (zero where reached); a swinging leg
     whose IK jumps to another solution than the plan's keeps the plan's joints (a
     joint-space swing over an edge flips the knee mid-air: the foot off by the body's
@@ -201,9 +201,9 @@ def _correction_time_s(robot, pos_err: _Array, rot_err: _Array, local=None) -> f
     The base's error, and its rotation's at the hips (the lever of the farthest hip), moved
     from rest to rest under the planner's body-move time law (``body_speed_m_s``,
     ``body_accel_m_s2`` of ``local``'s settings; the defaults for ``robot`` without it). The plan's
-    four-feet phase is timed for the plan's own move, 0.2 s for millimetres: barrier75mm's
-    body, 2.8 cm off the plan after steps planned anew, was pulled back in those 0.2 s and
-    the robot tipped as the next foot lifted, and fell.
+    four-feet phase is timed for the plan's own move (0.2 s for millimetres), too short for
+    a body centimetres off: in MuJoCo a body 2.8 cm off the plan, pulled back in 0.2 s,
+    tipped the robot as the next foot lifted.
     """
     from planner.body.kinematics import hip_point_B
     from planner.motion.time_law import rest_to_rest_durations_s, timed_settings
@@ -262,29 +262,27 @@ def _follow_corrected(
     the COM (Pinocchio, of the corrected joints) too near a three-foot support's edge (the
     plan's balance is kept only where every foot is where the plan had it, up to one
     common offset), or put a thigh or shank on the sharp terrain deeper than at the start
-    (the plan's swing over an edge, from a body a few centimetres off, hit barrier75mm);
+    (the plan's swing over an edge, from a body a few centimetres off, can hit the edge);
     else whether the robot is still standing.
 
     Balance asks ``balance_m`` at every three-foot sample, by default (None) the keyframes'
     ``BALANCE_MARGIN_M`` (25 mm), 5 mm more than the plan's own path samples keep: the
     step is a fallback, executed open loop from a state the plan was not made for, with
-    errors the correction does not model (the feet's rolling, the servos' sag). At 20 mm
-    gen:11's corrected hind-leg swing after a 6 cm step down (21-22 mm all along) tipped
-    the body 34 degrees; with 25 mm the step is refused, the gait queue steps instead, and
-    the walk reaches the goal (the generated physics bench: 24 of 25 feedback runs, from
-    23). :func:`run_feedback` asks the path samples' 20 mm only where no step planned
+    errors the correction does not model (the feet's rolling, the servos' sag). Chosen from
+    MuJoCo runs: at 20 mm a corrected hind-leg swing after a 6 cm step down (21-22 mm all
+    along) tipped the body 34 degrees; at 25 mm such a step is refused and the gait queue
+    steps instead. :func:`run_feedback` asks the path samples' 20 mm only where no step planned
     anew is found at all.
 
     With ``local`` (a :class:`~planner.planning.local.LocalPlanner`) the corrected samples,
     before the servo blend, must also pass the check every path planned anew passes
     (:meth:`~planner.planning.local.LocalPlanner.path_problem`: body box, leg links between
     samples, friction cones, joint torques, the final stance's sway), so that a corrected
-    step is never held to less than a step planned anew (barrier75mm's plan of 1bc79ed,
-    its steps corrected first: one asked FR's knee for more than the 80 % of its effort a
-    path then allowed; 70 % since). A body measured off the plan is brought back over a
-    four-feet hold as long as :func:`_correction_time_s` asks, where the cycle's own
-    four-feet phase is shorter. Where a gate refuses, its reason is appended to the list
-    ``refused``.
+    step is never held to less than a step planned anew (a corrected step could otherwise
+    ask a knee for more of its effort than a planned path may use). A body measured off
+    the plan is brought back over a four-feet hold as long as :func:`_correction_time_s`
+    asks, where the cycle's own four-feet phase is shorter. Where a gate refuses, its
+    reason is appended to the list ``refused``.
     """
     from planner.body import stability
     from planner.body.kinematics import kinematics_of

@@ -116,14 +116,14 @@ def planned_body_poses(plan: Plan) -> list:
 def replan_rest(robot, terrain, mu, settings, state, goal_xy, tau):
     """A new plan of the rest of the walk from a measured ``state`` (8.3), or None.
 
-    When the precomputed plan's steps no longer fit the measured state (barrier75mm: the
-    robot 1 cm off the plan's pose beside the barrier, a knee near its limit), the soft
+    When the precomputed plan's steps no longer fit the measured state (e.g. the
+    robot 1 cm off the plan's pose beside a barrier, a knee near its limit), the soft
     planner (8.2, with its look-ahead and retrace) plans from there to the goal within
     ``REPLAN_BUDGET_S``; where it stalls, the recursive planner (8.5, which traces back
     and tries shorter strides) gets the same budget. Its steps become the guide. None
-    when neither reaches the goal: barrier9cm's two re-plans stopped after 7 and 12
-    steps, followed into their dead end, where the gait queue's greedy steps from the
-    measured state reach the goal.
+    when neither reaches the goal: a re-plan that stops short would be followed into its
+    dead end, where the gait queue's greedy steps from the measured state may still reach
+    the goal.
     """
     from dataclasses import replace
 
