@@ -553,7 +553,7 @@ def test_a_planner_stopped_after_tracing_back_keeps_the_walk_that_came_nearest(l
     if name == "soft":
         planner = SoftPlanner(littledog, terrain, settings=settings)
     else:  # small windows: the test is about what is kept, not about the search
-        small = RecursiveSettings(lookahead=2, node_budget=6, restart_strides=())
+        small = RecursiveSettings(lookahead=2, node_budget=6)
         planner = RecursivePlanner(littledog, terrain, settings=settings, recursion=small)
     real = planner.step
     seen = {"x": -np.inf}
@@ -577,40 +577,6 @@ def test_a_planner_stopped_after_tracing_back_keeps_the_walk_that_came_nearest(l
     assert plan.stats["steps"] >= 4
     assert _max_sliding(littledog, terrain, plan.samples) < 1e-6
     assert np.all(np.diff(plan.times) > 0)
-
-
-def test_a_stuck_recursive_run_is_restarted_with_a_shorter_stride(littledog):
-    """8.5's restarts: a run stuck short of the goal (a wall for FL at x = 0.3 m, put there
-    only while the stride is the default) is planned again from the start with the stride
-    scaled by the first of ``restart_strides``; that run reaches, and it is returned with
-    the runs listed in ``stats["restarts"]`` and the planning time of both."""
-    from planner.planning.local import LocalSettings
-    from planner.planning.recursive import RecursivePlanner, RecursiveSettings
-
-    terrain = load_terrain("flat")
-    settings = LocalSettings(max_cycles=400, no_progress_cycles=12)
-    small = RecursiveSettings(lookahead=2, node_budget=6, restart_strides=(0.97, 0.94))
-    planner = RecursivePlanner(littledog, terrain, settings=settings, recursion=small)
-    default_stride = planner.stride_m()
-    real = planner.step
-    strides = set()
-
-    def step(state, leg, tau, step_m, shrink=None):
-        strides.add(planner.stride_m())
-        out = real(state, leg, tau, step_m, shrink)
-        if planner.settings.step_m is None and leg == 0 and state.feet_W[0, 0] > 0.3:
-            out.ok, out.end, out.phase, out.diagnosis = False, None, "foot_placement", "wall"
-            out.moved, out.body_path = None, []
-        return out
-
-    planner.step = step
-    plan = planner.plan([0.2, 0.0], [0.6, 0.0])
-    assert plan.reached_goal, plan.message
-    runs = plan.stats["restarts"]
-    assert [r["stride_scale"] for r in runs] == [0.97] and runs[0]["reached"]
-    assert strides == {default_stride, 0.97 * default_stride}
-    assert plan.stats["planning_time_s"] > runs[0]["planning_time_s"]
-    assert planner.settings.step_m is None  # the planner's own settings are left as they were
 
 
 @pytest.mark.parametrize("leg", [0, 3])

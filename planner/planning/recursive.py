@@ -33,13 +33,6 @@ cannot be made, go back as far as needed and try the earlier steps differently. 
   (:meth:`~planner.planning.local.LocalPlanner.blocks_passage`). Asking it of every leg
   (``check_all_legs``) refuses sound windows, so it is asked only past a stall.
 
-A run that ends stuck short of the goal with time left is planned again from the start
-with the stride of Lambda_t scaled by each of :data:`RESTART_STRIDES` in turn (the rest of
-the budget), and the walk that ends nearest the goal is returned (``stats.restarts``). The
-search is chaotic: a foothold a fraction of a millimetre elsewhere leads the windows into
-other stances, so a dead end met from one stride is often not met from a neighbouring one
-(the restarts make success likelier, they do not make the search systematic).
-
 Where it beats 8.2: the soft planner commits every step greedily and, when a leg then
 cannot step, only swaps legs and shortens that one leg's stride; the recursive planner
 also undoes the steps that led there (for instance a long stride of the leg before) and
@@ -58,8 +51,6 @@ from planner.planning.step import Step
 
 AMBITIONS = ((1.0, None), (0.6, None), (0.3, 0.6))  # (rho_3 stride fraction, rho_2 shrink)
 MAX_WINDOW_RETRACES = 4  # committed windows planned again when no step is left, per run
-RESTART_STRIDES = (0.97, 0.94, 1.03)  # stride scales of the runs after one that got stuck:
-# shorter first (a stuck run took strides too ambitious for its stances), one longer last
 STALLED_WINDOWS = 2  # committed windows in a row that bring the COM no nearer the goal ...
 PROGRESS_M = 0.01  # ... by this [m] are traced back, with every leg checked at their ends
 
@@ -73,7 +64,6 @@ class RecursiveSettings:
     legs_per_level: int = 2
     ambitions: tuple = AMBITIONS
     check_all_legs: bool = False  # a window's end: every leg can move, not only the next
-    restart_strides: tuple = RESTART_STRIDES  # the runs after one that got stuck
 
 
 class _Budget(Exception):
@@ -105,45 +95,6 @@ class RecursivePlanner(LocalPlanner):
             "backtracks": 0, "dead_ends": 0, "windows": 0, "partial_windows": 0,
             "all_legs_windows": 0, "window_retraces": 0, "stall_retraces": 0,
         }  # fmt: skip
-
-    def plan(self, start_xy, goal_xy, tau=None, progress=None, start_state=None):
-        """8.5's walk (:meth:`LocalPlanner.plan`), restarted with other strides when stuck.
-
-        Where a run stops short of the goal with time left in the budget (not interrupted),
-        the walk is planned again from the start with the stride scaled by each of
-        ``recursion.restart_strides`` (:data:`RESTART_STRIDES`) until one reaches or the
-        budget is spent; the walk that ends nearest the goal is returned,
-        ``stats["restarts"]`` listing the runs.
-        """
-        args = (start_xy, goal_xy, tau, progress, start_state)
-        best = super().plan(*args)
-        budget = float(self.settings.time_budget_s)
-        spent = float(best.stats["planning_time_s"])
-        runs = []
-        kept = self.settings
-        stride_m = self.stride_m()
-        for scale in self.recursion.restart_strides:
-            if best.reached_goal or best.interrupted or spent >= budget:
-                break
-            self.settings = replace(kept, step_m=stride_m * scale, time_budget_s=budget - spent)
-            try:
-                again = super().plan(*args)
-            finally:
-                self.settings = kept
-            spent += float(again.stats["planning_time_s"])
-            runs.append(
-                {
-                    "stride_scale": scale,
-                    "reached": again.reached_goal,
-                    "distance_to_goal_m": again.distance_to_goal_m,
-                    "planning_time_s": again.stats["planning_time_s"],
-                }
-            )
-            if again.reached_goal or again.distance_to_goal_m < best.distance_to_goal_m:
-                best = again
-        best.stats["planning_time_s"] = spent
-        best.stats["restarts"] = runs
-        return best
 
     def F(self, walk: Walk, queue: tuple[int, ...], n: int, run: Run, win: _Window, path):
         """Make ``n`` steps from ``walk.state``; returns the queue after them, or None.
