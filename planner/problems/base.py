@@ -543,10 +543,9 @@ class ThetaProblem:
 
     def _diagnose(self, status: str, violations: dict[str, float]) -> str:
         """Name the violated groups, most severe first (each relative to its unit scale)."""
-        bad = {k: v for k, v in violations.items() if not v <= FEASIBILITY_TOL}
-        if not bad:
-            return f"{self.name}: IPOPT status {status}"
         order = self.violated_groups(violations)
+        if not order:
+            return f"{self.name}: IPOPT status {status}"
         unit = {
             "forces": "N",
             "joint_limits": "rad",
@@ -555,7 +554,9 @@ class ThetaProblem:
             "torque": "of the effort",
             "sway": "of the least sway stiffness",
         }
-        listed = ", ".join(f"'{k}' by {bad[k]:.3g} {unit.get(k, 'm')}".rstrip() for k in order)
+        listed = ", ".join(
+            f"'{k}' by {violations[k]:.3g} {unit.get(k, 'm')}".rstrip() for k in order
+        )
         return f"{self.name}: IPOPT status {status}; violated: {listed}" + self._explain(order[0])
 
     def _explain(self, group: str) -> str:
