@@ -1,10 +1,11 @@
-# stratawalk: make demo | make test | make lint
+# stratawalk: make demo | make test | make lint | make docs
 PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
+DOCS_STAMP := $(VENV)/.docs-installed
 
-.PHONY: demo test lint bench fuzz clean
+.PHONY: demo test lint bench fuzz clean docs
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -27,7 +28,7 @@ test: $(STAMP)
 # courses: LittleDog x 17 courses (9 named, 8 of issue 15) x soft/recursive, 240 s budget;
 #   ~60 min on 2 cores
 # physics: 9 courses + 20 generated, plan then MuJoCo open/feedback/correct at time scale 1;
-#   ~90 min on 2 cores (a 2 m plan takes 30-60 s since the rolling feet; see the README);
+#   ~90 min on 2 cores (a 2 m plan takes 30-60 s since the rolling feet; docs/guide/performance.md);
 #   ladder: one feature per course at growing sizes, the limits table (~20 min);
 #   speed: planning time per course (median of 5), where it goes, flat 1-8 m (~10 min);
 #   robots: every robot of the list on flat, rough and step courses scaled to it (~15 min)
@@ -44,6 +45,16 @@ bench: $(STAMP)
 # a fresh seed each run): never a traceback, never a hang; ~6 min on 2 cores
 fuzz: $(STAMP)
 	STRATAWALK_FUZZ_SCALE=20 $(PY) -m pytest -q tests/test_fuzz.py --hypothesis-show-statistics
+
+# the documentation site into site/ (open site/index.html; .venv/bin/mkdocs serve previews it):
+# mkdocs build --strict, so any warning (a broken cross-reference, a missing page) fails it;
+# the API reference, the command pages and the settings reference are generated from the code
+$(DOCS_STAMP): $(STAMP) pyproject.toml
+	$(PY) -m pip install --quiet -e ".[docs]"
+	touch $(DOCS_STAMP)
+
+docs: $(DOCS_STAMP)
+	NO_MKDOCS_2_WARNING=1 DISABLE_MKDOCS_2_WARNING=true $(VENV)/bin/mkdocs build --strict
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check planner tests

@@ -390,6 +390,7 @@ def _bad_location(where: str, tmp_path: Path) -> str:
         (["plan", "--terrain", "flat", "--goal", "2.2,0", "--out", "{bad}/plan.json"], "--out"),
         (["export", "{plan}", "--out", "{bad}/t.csv"], "--out"),
         (["export", "{plan}", "--out", "{bad}/t.npz"], "--out"),
+        (["export", "{plan}", "--out", "{bad}/t.bag"], "--out"),
         (["simulate", "{plan}", "--out", "{bad}/s.json"], "--out"),
         (["replay", "{plan}", "--html", "{bad}/r.html"], "--html"),
         (["plot", "{plan}", "--out", "{bad}/plots"], "--out"),

@@ -367,7 +367,7 @@ def least_squares_ratios_ca(
     tau_i = g_i - J_i^T f_i per support leg (:meth:`LegKinematics.gravity_torque_ca`,
     :meth:`LegKinematics.contact_jacobian_W_ca`) and the balance A f = b (forces sum to m g
     up, moments about the COM to zero: eq. 4), the minimiser of sum_j (tau_j / e_j)^2
-    solves the KKT system [2 B^T B, A^T; A, 0] [f; l] = [2 B^T c; b], B = W J^T, c = W g,
+    solves the KKT system ``[2 B^T B, A^T; A, 0] [f; l] = [2 B^T c; b]``, B = W J^T, c = W g,
     W = diag(1 / e), solved by blocks (B is block diagonal). Equal to the SOCP's
     distribution wherever that lies inside the cones (tested). Returns the (3 k,) ratios
     and the k forces [N] (CasADi), in the order of ``support``.

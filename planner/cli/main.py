@@ -364,13 +364,25 @@ def _cmd_simulate(args) -> int:
 
 
 def _add_export_parser(subparsers):
-    """Add ``export plan.json --rate HZ --out FILE.csv|FILE.npz``."""
+    """Add ``export plan.json --rate HZ --out FILE.csv|FILE.npz|BAG.bag [--format F]``."""
     p = subparsers.add_parser(
-        "export", help="a plan as a fixed-rate trajectory (CSV or npz) for a controller"
+        "export",
+        help="a plan as a fixed-rate trajectory (CSV, npz or ROS 2 bag) for a controller",
     )
     p.add_argument("plan", help="plan.json written by `stratawalk plan`")
     p.add_argument("--rate", type=float, default=500.0, help="rows per second (default 500)")
-    p.add_argument("--out", required=True, help="FILE.csv or FILE.npz")
+    p.add_argument(
+        "--out",
+        required=True,
+        help="FILE.csv, FILE.npz, or a ROS 2 bag folder NAME.bag (rosbag2: metadata.yaml and "
+        "an SQLite3 .db3; an earlier bag there is replaced)",
+    )
+    p.add_argument(
+        "--format",
+        choices=("csv", "npz", "rosbag2"),
+        help="the output format (default: from the --out suffix); rosbag2: a ROS 2 bag "
+        "folder of any name, written with the Python package rosbags",
+    )
     p.add_argument(
         "--force",
         action="store_true",
@@ -382,22 +394,40 @@ def _add_export_parser(subparsers):
 
 
 def _cmd_export(args) -> int:
-    """Run ``stratawalk export`` (planner/planfile/export.py)."""
+    """Run ``stratawalk export`` (planner/planfile/export.py, rosbag.py)."""
     from planner.core.outputs import check_file
-    from planner.planfile.export import export_plan, export_rows, file_size_b
+    from planner.planfile.export import export_format, export_plan, export_rows, file_size_b
     from planner.planfile.loader import load_plan
 
-    check_file(args.out, "--out", suffixes=(".csv", ".npz"))
+    fmt = export_format(args.out, args.format)
+    if fmt == "rosbag2":
+        from planner.planfile import rosbag
+
+        rosbag.require_rosbags()
+        rosbag.check_bag(args.out, "--out")
+    else:
+        check_file(args.out, "--out", suffixes=(f".{fmt}",))
     plan = load_plan(args.plan, robot=args.robot)
-    check_file(args.out, "--out", size_b=file_size_b(export_rows(plan, args.rate), args.out))
+    rows = export_rows(plan, args.rate)
+    if fmt == "rosbag2":
+        rosbag.check_bag(args.out, "--out", size_b=rosbag.bag_size_b(rows))
+    else:
+        check_file(args.out, "--out", size_b=file_size_b(rows, args.out))
     traj = export_plan(plan, args.rate, force=args.force)
     if traj.skipped:
         print(f"stratawalk: warning: {one_line(traj.skipped)}", file=sys.stderr)
-    path = traj.save(args.out)
-    print(
-        f"wrote {path}: {len(traj.t)} rows at {traj.rate_hz:g} Hz, {traj.t[-1] - traj.t[0]:.2f} s, "
-        f"{len(traj.columns())} columns"
-    )
+    span = f"{len(traj.t)} rows at {traj.rate_hz:g} Hz, {traj.t[-1] - traj.t[0]:.2f} s"
+    if fmt == "rosbag2":
+        path, count = rosbag.write_rosbag(
+            traj, args.out, base_frame=rosbag.root_link(plan.load_robot())
+        )
+        print(
+            f"wrote {path}: ROS 2 bag (sqlite3), {span}, {count} messages on "
+            f"{len(rosbag.TOPICS)} topics"
+        )
+    else:
+        path = traj.save(args.out)
+        print(f"wrote {path}: {span}, {len(traj.columns())} columns")
     return 0
 
 
@@ -426,7 +456,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     r.set_defaults(func=_cmd_robot)
     t = sub.add_parser("terrain", help="list terrains, or describe/draw one")
-    t.add_argument("name", nargs="?", help="terrain name (terrains/NAME.yaml) or YAML path")
+    t.add_argument(
+        "name", nargs="?", help="terrain name (terrains/NAME.yaml), YAML or mesh (.stl/.obj/.ply)"
+    )
     t.add_argument("--png", help="write a top view with height colours to this PNG")
     t.add_argument(
         "--guide", metavar="X,Y", help="with --png: draw ROBOT's cost map and the guide path to X,Y"
@@ -436,7 +468,9 @@ def build_parser() -> argparse.ArgumentParser:
     t.set_defaults(func=_cmd_terrain)
     pl = sub.add_parser("plan", help="plan a walk and write a stratawalk.plan/1 file")
     pl.add_argument("--robot", default="littledog")
-    pl.add_argument("--terrain", required=True, help="terrain name or YAML path")
+    pl.add_argument(
+        "--terrain", required=True, help="terrain name, YAML or mesh (.stl/.obj/.ply) path"
+    )
     pl.add_argument(
         "--goal", help="X,Y [m] (required unless --print-config; a gen:... course: its end)"
     )

@@ -152,7 +152,7 @@ def near_terrain_caps(clearance_m: _Array, margin_m: float, lag_s: float) -> _Ar
 
 
 def carried_accel_m_s2(margin_n, cap_m_s2: float, need_n: float, iters: int = 6) -> float:
-    """The largest acceleration in [floor, cap] [m/s^2] whose balance margin stays >= ``need_n``.
+    """The largest acceleration in [floor, cap] (m/s^2) whose balance margin stays >= ``need_n``.
 
     ``margin_n(a)``: the friction-cone margin [N] of a sample accelerating at ``a`` along
     its path, both ways (eq. 4 with gravity g - a u: d'Alembert's inertial force at the

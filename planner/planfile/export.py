@@ -1,4 +1,8 @@
-"""A plan as a fixed-rate trajectory for a robot controller: CSV or npz.
+"""A plan as a fixed-rate trajectory for a robot controller: CSV, npz or a ROS 2 bag.
+
+The format (:func:`export_format`): ``--out`` ending in ``.csv`` or ``.npz`` writes that
+file; ending in ``.bag``, or with ``--format rosbag2``, a ROS 2 bag folder of the same rows
+(:mod:`planner.planfile.rosbag`).
 
 Rows at t_i = i / rate from the plan's first to its last sample time (the last sample's
 time is always a row). Each row holds:
@@ -24,7 +28,8 @@ Contact flags are the segment's: a foot in contact at both of its ends.
 Forces and torques are the least-squares holding forces of :mod:`planner.body.torques` at the
 samples (a foot unloads before lift-off, loads after touch-down:
 :func:`planner.planfile.plan.loaded_feet`), linear between them: the servo feed-forward the
-executor applies. ``stratawalk simulate plan.json --trajectory FILE`` executes an export.
+executor applies. ``stratawalk simulate plan.json --trajectory FILE`` executes a CSV or npz
+export.
 """
 
 from __future__ import annotations
@@ -46,8 +51,10 @@ if TYPE_CHECKING:
     from planner.planfile.plan import Plan
 
 __all__ = [
+    "FORMATS",
     "ROW_MEMORY_B",
     "ExportedTrajectory",
+    "export_format",
     "export_plan",
     "export_rows",
     "file_size_b",
@@ -133,6 +140,39 @@ class ExportedTrajectory:
                         w.writerow([repr(float(v)) for v in row])
 
         return write_atomic(path, write)
+
+
+FORMATS = ("csv", "npz", "rosbag2")
+
+
+def export_format(out: str | Path, fmt: str | None = None, option: str = "--out") -> str:
+    """The format of ``stratawalk export --out OUT [--format FMT]``: csv, npz or rosbag2.
+
+    ``fmt`` if given (the suffix is then checked where the output is), else from the
+    suffix: .csv, .npz, .bag (a ROS 2 bag folder). InputError naming ``option`` otherwise.
+    """
+    from planner.core.outputs import check_file
+
+    if fmt is not None:
+        if fmt not in FORMATS:
+            raise InputError(f"--format {fmt}: give one of {', '.join(FORMATS)}")
+        return fmt
+    suffix = Path(out).suffix.lower()
+    if suffix in (".csv", ".npz"):
+        return suffix[1:]
+    if suffix == ".bag":
+        return "rosbag2"
+    path = Path(out)
+    if str(out).strip() and path.is_dir():
+        raise InputError(
+            f"{option} {path}: is a folder; give a file name like {path / 'out.csv'}, or a "
+            f"ROS 2 bag folder name like {path / 'walk.bag'}"
+        )
+    check_file(out, option)  # a device, a file on the way, an unwritable folder
+    raise InputError(
+        f"{option} {path}: give a file name ending in .csv or .npz, or a ROS 2 bag folder name "
+        "ending in .bag (or add --format rosbag2)"
+    )
 
 
 def _segment_index(times: _Array, t: _Array) -> NDArray[np.int_]:

@@ -44,6 +44,15 @@ segment start inside a ``course``):
 ``heightfield``
     A grid from a file (``.npy``, ``.csv``, 16-bit ``.png``) or inline ``heights``; see
     :mod:`planner.world.heightfield`.
+``mesh``
+    An STL, OBJ or PLY surface (``file``) rasterised to a height field: ``metres_per_unit``
+    (default 1; 0.001 for a mesh in mm), ``up`` (the file's up axis, ``z`` or ``y``),
+    ``offset`` [dx, dy, dz] (metres, added after scaling), ``region`` [x0, x1, y0, y1]
+    (default the mesh's xy bounds), ``resolution`` (default 1 cm, coarser past 100,000
+    nodes). Its top surface is sampled; a node not under the mesh, or under an overhang,
+    is an error (:mod:`planner.world.mesh_terrain`). The normalised spec holds the grid
+    (``heights``), so a plan file needs no mesh. A mesh path also loads directly
+    (:func:`load_terrain`).
 ``course``
     ``segments``: a list of kinds, each with a ``length``, laid end to end along x from
     ``x_min``. z is the sum of the segments' contributions, each evaluated at x minus its
@@ -93,6 +102,7 @@ import numpy as np
 import yaml
 
 import planner
+from planner.world.mesh_terrain import is_mesh_path
 from planner.world.terrain_backends import _CHUNK, CA
 from planner.world.terrain_backends import NP as NP  # re-exported
 from planner.world.terrain_kinds import KINDS, _Heightfield, _Kind
@@ -320,7 +330,8 @@ class Terrain:
         source
             Name used in error messages (usually the YAML file).
         base_dir
-            Directory that relative height-field paths are resolved against (default cwd).
+            Directory that relative height-field and mesh paths are resolved against
+            (default cwd).
 
         Raises
         ------
@@ -535,11 +546,12 @@ def _display(path: Path) -> str:
 
 
 def load_terrain(name_or_path: str | Path) -> Terrain:
-    """Load a terrain by name (``terrains/NAME.yaml``), generated name or YAML path.
+    """Load a terrain by name (``terrains/NAME.yaml``), generated name, YAML or mesh path.
 
     A generated course's name ``gen:SEED[:DIFFICULTY[:LENGTH[:KINDS]]]`` or a feature
     ladder's ``feat:KIND:SIZE`` (:mod:`planner.world.course_gen`) is drawn anew: the same name
-    gives the same terrain.
+    gives the same terrain. A ``.stl``, ``.obj`` or ``.ply`` path is a ``mesh`` terrain with
+    every default (metres, z up, the mesh's xy bounds, 1 cm); a YAML of kind ``mesh`` sets them.
 
     Raises
     ------
@@ -557,6 +569,7 @@ def load_terrain(name_or_path: str | Path) -> Terrain:
     is_path = (
         isinstance(name_or_path, Path)
         or text.endswith((".yaml", ".yml"))
+        or is_mesh_path(text)
         or "/" in text
         or os.sep in text
     )
@@ -564,6 +577,9 @@ def load_terrain(name_or_path: str | Path) -> Terrain:
         path = Path(text).expanduser()
         if not path.is_file():
             raise _error(_display(path), "(file)", "no such terrain file; check the path")
+        if is_mesh_path(path):
+            spec = {"name": path.stem, "kind": "mesh", "file": str(path)}
+            return Terrain(spec, source=_display(path))
     else:
         path = terrains_dir() / f"{text}.yaml"
         if not path.is_file():

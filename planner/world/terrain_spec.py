@@ -153,6 +153,25 @@ class _Fields:
             raise self.fail(key, f"expected [x, y] (two finite numbers), got {_show(value)}")
         return [float(value[0]), float(value[1])]
 
+    def numbers(
+        self, key: str, count: int, default: Any = _REQUIRED, hint: str = ""
+    ) -> list[float] | None:
+        """A list of ``count`` finite numbers."""
+        value = self.raw(key, default, hint)
+        if value is None:
+            return None
+        if (
+            not isinstance(value, (list, tuple))
+            or len(value) != count
+            or not all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                for v in value
+            )
+        ):
+            what = hint or f"{count} finite numbers"
+            raise self.fail(key, f"expected {what}, got {_show(value)}")
+        return [float(v) for v in value]
+
     def finish(self, known: Sequence[str] | None = None) -> None:
         """Reject any key that was not read."""
         extra = sorted(set(self.data) - self.used)
