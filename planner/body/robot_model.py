@@ -7,7 +7,8 @@ import it without importing each other.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import hashlib
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 import numpy as np
@@ -106,6 +107,24 @@ class Robot:
             pts = np.unique(np.vstack([self.body_vertices_B, self.body_bottom_points_B()]), axis=0)
             self._clearance_points_B = pts
         return pts
+
+    def fingerprint(self) -> str:
+        """A digest of the model: Pinocchio's serialised model and every field read from it.
+
+        Two robots with the same fingerprint have the same kinematics, inertia, limits,
+        feet and body box, so the problems built for one serve the other
+        (:mod:`planner.problems.cache`).
+        """
+        digest = hashlib.sha256(self.model.saveToString().encode())
+        for part in [self, *self.legs]:
+            for f in fields(part):
+                value = getattr(part, f.name)
+                if f.name in ("model", "legs"):
+                    continue
+                if isinstance(value, np.ndarray):
+                    value = np.ascontiguousarray(value, float).tobytes()
+                digest.update(f.name.encode() + repr(value).encode())
+        return digest.hexdigest()
 
     def q_from(self, base_position_W, base_quat_xyzw, joints_rad) -> np.ndarray:
         """Pinocchio configuration q (19,) from base pose and (4, 3) or (12,) joint angles."""

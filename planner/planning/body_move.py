@@ -212,9 +212,7 @@ class BodyMoves:
         if support not in self._via_theta1:
             # the via pose is on four feet: no three-leg tip margin
             opts = replace(self.settings.theta, balance_margin_m=-np.inf)
-            self._via_theta1[support] = Theta1(
-                self.robot, self.terrain, support=support, options=opts, mu=self.mu
-            )
+            self._via_theta1[support] = self.shared(Theta1, opts, support=support)
         sol = self._via_theta1[support].solve(probe, self.check.com_W(path[k]), u_f, u_n)
         self._count("theta1", sol.feasible)
         if not sol.feasible:

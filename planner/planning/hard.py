@@ -122,10 +122,7 @@ class HardPlanner(SoftPlanner):
         """Theta1 for a support pattern (built on first use)."""
         key = tuple(sorted(support))
         if key not in self._theta1:
-            self._theta1[key] = Theta1(
-                self.robot, self.terrain, support=key, options=self.settings.theta, mu=self.mu,
-                height_band_m=HEIGHT_BAND_M,
-            )  # fmt: skip
+            self._theta1[key] = self.shared(Theta1, support=key, height_band_m=HEIGHT_BAND_M)
         return self._theta1[key]
 
     def holds_on_three(self, state: State, leg: int) -> bool:

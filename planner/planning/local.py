@@ -46,6 +46,7 @@ from planner.planning.targets import Targets
 from planner.planning.timing import Timing
 from planner.problems import Theta1, Theta2, Theta3, Theta4
 from planner.problems.base import ConstraintCheck
+from planner.problems.cache import shared_problem
 from planner.problems.options import LocalSettings
 
 
@@ -81,6 +82,7 @@ class LocalPlanner(Targets, LevelGround, PathChecks, Landing, Swings, BodyMoves,
         self._theta2: dict[tuple[tuple[int, ...], bool], Theta2] = {}
         self._theta3: dict[int, Theta3] = {}
         self._via_theta1: dict[tuple[int, ...], Theta1] = {}
+        self._fingerprints: tuple[str, str] | None = None  # robot's, terrain's (shared)
         self._failed_moves: dict[tuple, object] = {}  # body moves that failed (this run)
         self.stats = {
             "theta1": [0, 0],
@@ -102,23 +104,26 @@ class LocalPlanner(Targets, LevelGround, PathChecks, Landing, Swings, BodyMoves,
         """Theta2 for a support pattern, landing-ready or not (built on first use)."""
         key = (tuple(sorted(support)), bool(landing) and len(support) == 3)
         if key not in self._theta2:
-            self._theta2[key] = Theta2(
-                self.robot,
-                self.terrain,
-                support=key[0],
-                options=self.settings.theta,
-                mu=self.mu,
-                landing=key[1],
-            )
+            self._theta2[key] = self.shared(Theta2, support=key[0], landing=key[1])
         return self._theta2[key]
 
     def theta3(self, leg: int) -> Theta3:
         """Theta3 for a swing leg (built on first use)."""
         if leg not in self._theta3:
-            self._theta3[leg] = Theta3(
-                self.robot, self.terrain, leg, options=self.settings.theta, mu=self.mu
-            )
+            self._theta3[leg] = self.shared(Theta3, leg=leg)
         return self._theta3[leg]
+
+    def shared(self, cls, options=None, **kwargs):
+        """A Theta problem of this robot, terrain and mu, built once per process.
+
+        ``options`` default to the planner's Theta options (:func:`shared_problem`).
+        """
+        if self._fingerprints is None:
+            self._fingerprints = (self.robot.fingerprint(), self.terrain.fingerprint())
+        opts = self.settings.theta if options is None else options
+        return shared_problem(
+            cls, self.robot, self.terrain, opts, self.mu, self._fingerprints, **kwargs
+        )
 
     def _count(self, key: str, ok: bool) -> None:
         counts = self.stats.setdefault(key, [0, 0])  # theta2_held: only where two-beat
@@ -137,7 +142,7 @@ class LocalPlanner(Targets, LevelGround, PathChecks, Landing, Swings, BodyMoves,
         z = float(self.terrain.height(np.array(x), np.array(y))) + nominal_height_m(self.robot)
         p = np.array([x, y, z])
         u_f, u_n = reference_directions(tau, self.terrain, p, lam=tau.lambda_a)
-        sol = Theta4(self.robot, self.terrain, self.settings.theta, self.mu).solve(p, u_f, u_n)
+        sol = self.shared(Theta4).solve(p, u_f, u_n)
         self._count("theta4", sol.feasible)
         if not sol.feasible:
             from planner.core.errors import NoSolutionFound

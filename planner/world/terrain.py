@@ -91,6 +91,8 @@ The kinds are in :mod:`planner.world.terrain_kinds`, the numpy and CasADi backen
 
 from __future__ import annotations
 
+import hashlib
+import json
 import math
 import os
 from collections.abc import Callable, Mapping
@@ -343,6 +345,21 @@ class Terrain:
 
     def __repr__(self) -> str:
         return f"Terrain(name={self.name!r}, kind={self.kind!r}, bounds={self.bounds})"
+
+    def fingerprint(self) -> str:
+        """A digest of everything that defines z_T: the spec and each part's numeric data.
+
+        Two terrains with the same fingerprint give the same heights everywhere (a height
+        field's grid is hashed, not its file name), so the problems built on one serve the
+        other (:mod:`planner.problems.cache`).
+        """
+        digest = hashlib.sha256(json.dumps(self.spec, sort_keys=True, default=str).encode())
+        for off, k in self._segments:
+            digest.update(repr(float(off)).encode())
+            for name, value in sorted(vars(k).items()):
+                if isinstance(value, np.ndarray):
+                    digest.update(name.encode() + np.ascontiguousarray(value).tobytes())
+        return digest.hexdigest()
 
     # -- numpy ---------------------------------------------------------------------------
 

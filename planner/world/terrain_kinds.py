@@ -33,6 +33,7 @@ from planner.world.terrain_spec import _REQUIRED, _Context, _Fields, _show
 
 MAX_STONES = 5_000  # stepping stones in one field (each a term of the CasADi expression)
 MAX_ROUGH_CELLS = 2e7  # the grid a rough relief's amplitude is scaled on (a tenth wavelength)
+OFFSET_SETS_KEPT = 8  # offset sets whose e^{i k.d} a relief keeps (Rough.sharp_offsets)
 _LOG_SQRT_EPS_M = 1e-6  # keeps sqrt differentiable where a log's height underflows to 0
 
 
@@ -482,9 +483,23 @@ class _Rough(_Kind):
         instead of N M terms cosines.
         """
         at = np.exp(1j * (u[:, None] * self.kx + y[:, None] * self.ky + self.phase)) * self.a
-        by = np.exp(1j * (du[:, None] * self.kx + dy[:, None] * self.ky))
-        relief = (at @ by.T).real
+        relief = (at @ self._offset_factors(du, dy).T).real
         return self._window(u[:, None] + du[None, :], NP) * relief
+
+    def _offset_factors(self, du: np.ndarray, dy: np.ndarray) -> np.ndarray:
+        """(M, terms) e^{i k.d} of the offsets, kept for the offset sets asked last.
+
+        The callers ask again and again with the same few sets (a disc, a grid).
+        """
+        key = (np.ascontiguousarray(du).tobytes(), np.ascontiguousarray(dy).tobytes())
+        kept = self.__dict__.setdefault("_offsets_kept", {})
+        by = kept.get(key)
+        if by is None:
+            by = np.exp(1j * (du[:, None] * self.kx + dy[:, None] * self.ky))
+            if len(kept) >= OFFSET_SETS_KEPT:
+                kept.clear()
+            kept[key] = by
+        return by
 
 
 class _Rocks(_Kind):
