@@ -39,6 +39,7 @@ from planner.planning.driver import (
 from planner.planning.landing import Landing
 from planner.planning.level import LevelGround
 from planner.planning.path_checks import TORQUE_FRACTION, PathChecks
+from planner.planning.sequence import ContactSequence
 from planner.planning.step import Step
 from planner.planning.stepping import Stepping
 from planner.planning.swing import Swings
@@ -50,7 +51,9 @@ from planner.problems.cache import shared_problem
 from planner.problems.options import LocalSettings
 
 
-class LocalPlanner(Targets, LevelGround, PathChecks, Landing, Swings, BodyMoves, Stepping, Timing):
+class LocalPlanner(
+    Targets, LevelGround, PathChecks, Landing, Swings, BodyMoves, ContactSequence, Stepping, Timing
+):
     """The shared part of the local planners, for one robot on one terrain.
 
     Theta problems are built once per support pattern or swing leg and cached; initial

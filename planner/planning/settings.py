@@ -17,6 +17,7 @@ file (``stratawalk plan --config settings.yaml``) holds any of them::
     body_samples: 16        # samples of a body move
     swing_samples: 24       # samples of a swing
     gait: [HL, FL, HR, FR]  # the crawl's leg order
+    footholds: search       # each step's foothold from the contact-sequence search
     seed: 1
 
 Command-line options override the file, which overrides the defaults. The effective
@@ -112,6 +113,11 @@ SETTINGS: tuple[Setting, ...] = (
     Setting("body_samples", "--body-samples", "int", "samples of a body move", 2, 1000, False),
     Setting("swing_samples", "--swing-samples", "int", "samples of a swing", 4, 1000, False),
     Setting("gait", "--gait", "gait", "leg order of the crawl, e.g. HL,FL,HR,FR"),
+    Setting(
+        "footholds", "--footholds", "choice",
+        "first foothold of each step: lambda_t (eq. 13, one step ahead) or search (the "
+        "contact-sequence search, a gait cycle ahead)", choices=("lambda_t", "search"),
+    ),
     Setting("seed", "--seed", "int", "random seed (CMA-ES of --global, >= 1)", 1, 2**31 - 1, False),
     Setting("time_budget_s", "--time-budget", "float", "planning time budget [s]", 0.0, 1e6),
 )  # fmt: skip
@@ -302,6 +308,7 @@ def effective(planner: Any, seed: int = 1) -> dict:
         "body_samples": int(loc.body_samples),
         "swing_samples": int(loc.swing_samples),
         "gait": [LEG_NAMES[i] for i in (loc.gait or CRAWL)],
+        "footholds": str(loc.footholds),
         "seed": int(seed),
         "time_budget_s": float(loc.time_budget_s),
     }

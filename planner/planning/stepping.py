@@ -92,10 +92,13 @@ class Stepping:
         knee: int | None = None,
     ) -> Step:
         """One attempt of :meth:`step` at the body height in force."""
+        searched = None
         if target_W is not None:
             target = np.asarray(target_W, float).reshape(3)
         else:
             target, _ = self.foothold_target(state, leg, tau, step_m, shrink)
+            searched = self.searched_foothold(state, leg, tau, step_m, target)
+            target = target if searched is None else searched
         order = [target]  # the footholds to try, in order
         extended = False  # the other footholds are in ``order``
         if try_others and self.leaves_no_support(state, leg, target):
@@ -107,6 +110,8 @@ class Stepping:
                 max_lateral_m=DEAD_END_LATERAL_M,
                 keep=lambda c: not self.leaves_no_support(state, leg, c),
             ) + [target]  # fmt: skip
+            order = [c for c in order[:-1] if self.certified_ahead(state, leg, tau, step_m, c)]
+            order.append(target)
         first = None  # the first failure, reported when no foothold works
         dead_end = None  # the first step made that leaves the next leg no body move
         k = 0
@@ -150,12 +155,18 @@ class Stepping:
                         sol3.diagnosis,
                     )  # fmt: skip
             first = first or step
+            if k == 0 and searched is not None:  # the search repairs from here next time
+                self.mark_unrealised(state, leg, searched)
             if FailureKind.BALANCE_MARGIN in step.failure and step.phase == "body_move" and k == 0:
                 break  # the COM cannot shift onto the other three legs: no foothold helps
             if not try_others:
                 break
             if not extended:
-                order += self.other_footholds(state, leg, tau, target, shrink)
+                order += [
+                    c
+                    for c in self.other_footholds(state, leg, tau, target, shrink)
+                    if self.certified_ahead(state, leg, tau, step_m, c)
+                ]
                 extended = True
             k += 1
         return dead_end or first

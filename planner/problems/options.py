@@ -135,6 +135,9 @@ class LocalSettings:
     overlap_worker : search each step's swing overlap in a forked second process while the
         next step is planned (:mod:`planner.planning.prefetch`); the plan is the same to the
         bit either way, only the wall time differs.
+    footholds : "search": each step's first foothold from the contact-sequence search
+        (:mod:`planner.motion.contact_search`: a gait cycle ahead, certified), Lambda_t's
+        where it finds none; "lambda_t": Lambda_t's (eq. 13, section 8.2.2) only.
     """
 
     gait: tuple[int, ...] = CRAWL
@@ -162,4 +165,5 @@ class LocalSettings:
     level_body_samples: int | None = None
     level_swing_samples: int | None = None
     overlap_worker: bool = True
+    footholds: str = "lambda_t"
     theta: ThetaOptions = field(default_factory=ThetaOptions)

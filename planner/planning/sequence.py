@@ -1,0 +1,99 @@
+"""Footholds from the contact-sequence search, realised step by step (beyond section 8.2).
+
+With ``settings.footholds`` "search" a step's first foothold comes from the contact-sequence
+search (:class:`planner.motion.contact_search.ContactSearch`): Lambda_t's (eq. 13) where
+every later step of the gait cycle still has a certified foothold after it, else the
+first of a certified sequence. The search runs at every step, from the stance the walk is
+in; a step the Theta problems cannot realise is remembered
+(:meth:`~planner.motion.contact_search.ContactSearch.mark_failed`) and the next search
+repairs from there.
+
+:class:`ContactSequence` is a part of :class:`planner.planning.local.LocalPlanner`; it uses
+the planner's ``robot``, ``terrain``, ``mu``, ``settings``, ``extra_stats``,
+``balance_margin_m`` and :meth:`_next_leg`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from planner.body.state import State
+from planner.motion.contact_search import ContactSearch, SearchSettings
+from planner.motion.heuristics import reference_directions
+from planner.motion.trajectory import Trajectory
+
+__all__ = ["FLOOR_SPAN_M", "ContactSequence"]
+
+FLOOR_SPAN_M = 0.03  # the body's footprint, widened by this, bounds its least height
+
+
+class ContactSequence:
+    """The contact-sequence search inside the local planner (module docstring)."""
+
+    def searched_foothold(
+        self, state: State, leg: int, tau: Trajectory, step_m: float, proposal_W
+    ) -> np.ndarray | None:
+        """The first foothold of a certified sequence from ``state``, or None.
+
+        ``proposal_W`` (Lambda_t's) is tried first and kept when every later step of the
+        cycle still has a certified foothold; None: the search is off or found nothing.
+        """
+        if self.settings.footholds != "search":
+            return None
+        search = self._contact_search(tau)
+        legs = self._cycle_legs(leg, search.settings.horizon)
+        steps = search.search(
+            np.asarray(state.feet_W, float).reshape(4, 3), state.base_position_W, legs, step_m,
+            first_W=proposal_W,
+        )  # fmt: skip
+        self.extra_stats["contact_search"] = dict(search.stats)  # the plan's record
+        return np.array(steps[0][1]) if steps else None
+
+    def certified_ahead(self, state: State, leg: int, tau: Trajectory, step_m: float, c) -> bool:
+        """Whether ``leg`` to ``c`` starts a sequence certified a whole gait cycle ahead.
+
+        Always True with the search off. The other footholds a step tries (8.2.2) pass
+        this, so that no step the walk takes leaves a later leg without a certified one.
+        """
+        if self.settings.footholds != "search":
+            return True
+        search = self._contact_search(tau)
+        legs = self._cycle_legs(leg, search.settings.horizon)
+        feet = np.asarray(state.feet_W, float).reshape(4, 3)
+        steps = search.search(feet, state.base_position_W, legs, step_m, first_W=c, only_first=True)
+        return len(steps) == len(legs)
+
+    def _cycle_legs(self, leg: int, horizon: int) -> list[int]:
+        legs = [leg]
+        while len(legs) < horizon:
+            legs.append(self._next_leg(legs[-1]))
+        return legs
+
+    def mark_unrealised(self, state: State, leg: int, foothold_W) -> None:
+        """The Theta problems could not move ``leg`` to ``foothold_W``: the search learns it."""
+        search = getattr(self, "_contact_searcher", None)
+        if search is not None:
+            search.mark_failed(np.asarray(state.feet_W, float), leg, np.asarray(foothold_W))
+
+    def _contact_search(self, tau: Trajectory) -> ContactSearch:
+        search = getattr(self, "_contact_searcher", None)
+        if search is None or getattr(self, "_search_tau", None) is not tau:
+            box_lo_z = float(self.robot.body_box_B[0][2])
+            half = 0.5 * (np.asarray(self.robot.body_box_B[1]) - self.robot.body_box_B[0])
+            span = half[:2] + FLOOR_SPAN_M
+            clearance = self.settings.theta.clearance_m
+
+            def forward(p):
+                return reference_directions(tau, self.terrain, np.asarray(p, float))[0]
+
+            def z_floor(feet_W):
+                c = np.asarray(feet_W, float).mean(axis=0)
+                xs = np.linspace(c[0] - span[0], c[0] + span[0], 13)
+                ys = np.linspace(c[1] - span[1], c[1] + span[1], 5)
+                X, Y = np.meshgrid(xs, ys)
+                return float(np.max(self.terrain.height_sharp(X, Y))) + clearance - box_lo_z
+
+            settings = SearchSettings(balance_margin_m=self.balance_margin_m, clearance_m=clearance)
+            search = ContactSearch(self.robot, self.terrain, self.mu, forward, z_floor, settings)
+            self._contact_searcher, self._search_tau = search, tau
+        return search
