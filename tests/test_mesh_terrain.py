@@ -300,7 +300,8 @@ def test_terrain_command_describes_and_draws_a_mesh(tmp_path, capsys):
 # ----------------------------------------------------------- a plan on a mesh course
 @pytest.fixture(scope="module")
 def plans(tmp_path_factory):
-    """The step course planned as a mesh (5 mm grid) and as terrains/step5cm.yaml."""
+    """The step course planned as a mesh (5 mm grid) and as terrains/step5cm.yaml, to
+    x = 1.5 m: every foot crosses the step."""
     folder = tmp_path_factory.mktemp("mesh_plan")
     _write(_step_course(), folder / "course.stl")
     spec = {"name": "course", "kind": "mesh", "file": "course.stl", "resolution": 0.005}
@@ -308,7 +309,7 @@ def plans(tmp_path_factory):
     out = {}
     for key, terrain in (("mesh", str(course)), ("yaml", "step5cm")):
         plan, report = plan_walk(
-            "littledog", terrain, (2.2, 0.0), (0.2, 0.0), "soft", LocalSettings()
+            "littledog", terrain, (1.5, 0.0), (0.2, 0.0), "soft", LocalSettings()
         )
         out[key] = (plan.save(folder / f"{key}.json"), plan, report)
     return folder, out

@@ -49,14 +49,24 @@ class ContactSequence:
         self.extra_stats["contact_search"] = dict(search.stats)  # the plan's record
         return np.array(steps[0][1]) if steps else None
 
-    def certified_ahead(self, state: State, leg: int, tau: Trajectory, step_m: float, c) -> bool:
-        """Whether ``leg`` to ``c`` starts a sequence certified a whole gait cycle ahead.
+    def certified_first(self, state: State, leg: int, tau: Trajectory, step_m: float, footholds):
+        """``footholds`` (the other footholds a step tries, 8.2.2), certified ones first.
 
-        Always True with the search off. The other footholds a step tries (8.2.2) pass
-        this, so that no step the walk takes leaves a later leg without a certified one.
+        A foothold that starts a sequence certified a whole gait cycle ahead
+        (:meth:`certified_ahead`) is tried before those that do not; these stay, last: the
+        certificates are conservative (no body tilt of its own, the body's floor over the
+        whole footprint), and a barrier is crossed on steps they refuse. Unchanged with
+        the search off.
         """
         if self.settings.footholds != "search":
-            return True
+            return list(footholds)
+        ok = [self.certified_ahead(state, leg, tau, step_m, c) for c in footholds]
+        return [c for c, y in zip(footholds, ok, strict=True) if y] + [
+            c for c, y in zip(footholds, ok, strict=True) if not y
+        ]
+
+    def certified_ahead(self, state: State, leg: int, tau: Trajectory, step_m: float, c) -> bool:
+        """Whether ``leg`` to ``c`` starts a sequence certified a whole gait cycle ahead."""
         search = self._contact_search(tau)
         legs = self._cycle_legs(leg, search.settings.horizon)
         feet = np.asarray(state.feet_W, float).reshape(4, 3)

@@ -110,8 +110,7 @@ class Stepping:
                 max_lateral_m=DEAD_END_LATERAL_M,
                 keep=lambda c: not self.leaves_no_support(state, leg, c),
             ) + [target]  # fmt: skip
-            order = [c for c in order[:-1] if self.certified_ahead(state, leg, tau, step_m, c)]
-            order.append(target)
+            order = self.certified_first(state, leg, tau, step_m, order[:-1]) + [target]
         first = None  # the first failure, reported when no foothold works
         dead_end = None  # the first step made that leaves the next leg no body move
         k = 0
@@ -162,11 +161,8 @@ class Stepping:
             if not try_others:
                 break
             if not extended:
-                order += [
-                    c
-                    for c in self.other_footholds(state, leg, tau, target, shrink)
-                    if self.certified_ahead(state, leg, tau, step_m, c)
-                ]
+                others = self.other_footholds(state, leg, tau, target, shrink)
+                order += self.certified_first(state, leg, tau, step_m, others)
                 extended = True
             k += 1
         return dead_end or first
