@@ -38,7 +38,7 @@ from numpy.typing import NDArray
 
 from planner.body.kinematics import hip_point_B, kinematics_of, robot_cached
 from planner.motion.footholds import foothold_candidates
-from planner.motion.heuristics import frame_from_directions, horizontal_axes
+from planner.motion.heuristics import frame_from_directions, horizontal_axes, support_plane_W
 
 __all__ = [
     "BUDGET",
@@ -96,9 +96,7 @@ class Certificate:
 
 def stance_rotation_W(feet_W: _Array, forward_W: _Array) -> _Array:
     """Body rotation with z_B normal to the feet's least-squares plane, x_B along forward."""
-    P = np.asarray(feet_W, float).reshape(-1, 3)
-    c = P.mean(axis=0)
-    g, *_ = np.linalg.lstsq(P[:, :2] - c[:2], P[:, 2] - c[2], rcond=None)
+    g, _ = support_plane_W(feet_W)
     n = np.array([-g[0], -g[1], 1.0])
     return frame_from_directions(np.asarray(forward_W, float), n / np.linalg.norm(n))
 

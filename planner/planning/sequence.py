@@ -19,7 +19,6 @@ import numpy as np
 
 from planner.body.state import State
 from planner.motion.contact_search import ContactSearch, SearchSettings
-from planner.motion.heuristics import reference_directions
 from planner.motion.trajectory import Trajectory
 
 __all__ = ["FLOOR_SPAN_M", "ContactSequence"]
@@ -40,13 +39,7 @@ class ContactSequence:
         """
         if self.settings.footholds != "search":
             return None
-        search = self._contact_search(tau)
-        legs = self._cycle_legs(leg, search.settings.horizon)
-        steps = search.search(
-            np.asarray(state.feet_W, float).reshape(4, 3), state.base_position_W, legs, step_m,
-            first_W=proposal_W,
-        )  # fmt: skip
-        self.extra_stats["contact_search"] = dict(search.stats)  # the plan's record
+        steps = self._search_cycle(state, leg, tau, step_m, proposal_W, only_first=False)
         return np.array(steps[0][1]) if steps else None
 
     def certified_first(self, state: State, leg: int, tau: Trajectory, step_m: float, footholds):
@@ -67,17 +60,21 @@ class ContactSequence:
 
     def certified_ahead(self, state: State, leg: int, tau: Trajectory, step_m: float, c) -> bool:
         """Whether ``leg`` to ``c`` starts a sequence certified a whole gait cycle ahead."""
-        search = self._contact_search(tau)
-        legs = self._cycle_legs(leg, search.settings.horizon)
-        feet = np.asarray(state.feet_W, float).reshape(4, 3)
-        steps = search.search(feet, state.base_position_W, legs, step_m, first_W=c, only_first=True)
-        return len(steps) == len(legs)
+        steps = self._search_cycle(state, leg, tau, step_m, c, only_first=True)
+        return len(steps) == self._contact_search(tau).settings.horizon
 
-    def _cycle_legs(self, leg: int, horizon: int) -> list[int]:
+    def _search_cycle(self, state: State, leg: int, tau: Trajectory, step_m, first_W, only_first):
+        """The search over the gait cycle from ``leg`` (``horizon`` legs), recorded in stats."""
+        search = self._contact_search(tau)
         legs = [leg]
-        while len(legs) < horizon:
+        while len(legs) < search.settings.horizon:
             legs.append(self._next_leg(legs[-1]))
-        return legs
+        feet = np.asarray(state.feet_W, float).reshape(4, 3)
+        steps = search.search(
+            feet, state.base_position_W, legs, step_m, first_W=first_W, only_first=only_first
+        )
+        self.extra_stats["contact_search"] = dict(search.stats)  # the plan's record
+        return steps
 
     def mark_unrealised(self, state: State, leg: int, foothold_W) -> None:
         """The Theta problems could not move ``leg`` to ``foothold_W``: the search learns it."""
@@ -93,8 +90,9 @@ class ContactSequence:
             span = half[:2] + FLOOR_SPAN_M
             clearance = self.settings.theta.clearance_m
 
-            def forward(p):
-                return reference_directions(tau, self.terrain, np.asarray(p, float))[0]
+            def forward(p):  # u_f of reference_directions (7.2), without its normal
+                lam = tau.closest_lambda(np.asarray(p, float).reshape(3))
+                return np.asarray(tau.tangent(lam), float).reshape(3)
 
             def z_floor(feet_W):
                 c = np.asarray(feet_W, float).mean(axis=0)
