@@ -471,3 +471,35 @@ def test_clarabel_stall_on_an_ordinary_stance_is_retried():
     com = [0.5839186753820351, -0.003836096673121596, 0.13858309047892428]
     res = static_feasibility(feet, com, 3.004, [0, 1, 2, 3], 0.7, normals, with_com_margin=False)
     assert res.feasible and res.status == "Solved" and res.margin_N > 1.0
+
+
+def test_the_clarabel_matrices_are_scipy_s_csc_and_solve_the_same() -> None:
+    """statics._csc (index arrays shared per sparsity pattern) is the canonical CSC scipy
+    builds, and Clarabel solves the same problem with either to the bit."""
+    import clarabel
+    import scipy.sparse as sp
+
+    from planner.body.statics import _csc
+
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        a = rng.normal(size=(8, 5))
+        a[rng.uniform(size=a.shape) < 0.4] = 0.0
+        m, ref = _csc(a), sp.csc_matrix(a)
+        np.testing.assert_array_equal(m.toarray(), a)
+        for name in ("indptr", "indices", "data"):
+            np.testing.assert_array_equal(getattr(m, name), getattr(ref, name))
+        # min c.x over the box |x| <= 1 written as A x + s = b with s in the cone
+        q = rng.normal(size=5)
+        A = np.vstack([a, np.eye(5), -np.eye(5)])
+        b = np.concatenate([np.full(8, 10.0), np.ones(10)])
+        xs = []
+        for mat in (_csc(A), sp.csc_matrix(A)):
+            settings = clarabel.DefaultSettings()
+            settings.verbose = False
+            res = clarabel.DefaultSolver(
+                sp.csc_matrix((5, 5)), q, mat, b, [clarabel.NonnegativeConeT(18)], settings
+            ).solve()
+            assert str(res.status) == "Solved"
+            xs.append(np.asarray(res.x))
+        np.testing.assert_array_equal(xs[0], xs[1])

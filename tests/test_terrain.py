@@ -680,6 +680,33 @@ def test_heights_at_offsets_are_the_heights_of_the_moved_points(name, t):
     np.testing.assert_allclose(got, want, atol=1e-14, rtol=0)
 
 
+@pytest.mark.parametrize(("name", "t"), ALL, ids=IDS)
+def test_heights_on_a_grid_are_the_heights_at_its_nodes(name, t):
+    """height_sharp_grid (a relief's separable product) against height_sharp at the nodes."""
+    x0, x1, y0, y1 = t.bounds
+    xs = np.linspace(x0, x1, 173)
+    ys = np.linspace(y0, y1, 41)
+    gx, gy = np.meshgrid(xs, ys)
+    got = t.height_sharp_grid(xs, ys)
+    assert got.shape == (len(ys), len(xs))
+    np.testing.assert_allclose(got, t.height_sharp(gx, gy), atol=1e-14, rtol=0)
+
+
+def test_the_relief_s_numpy_heights_are_its_expression_s_to_the_bit():
+    """The rough kind's in-place numpy path (and its window skipped where tanh is 1 to the
+    last bit) gives the numbers of the generic expression, in the tapers and between."""
+    from planner.world.terrain_backends import NP
+
+    t = load_terrain("rough2cm")
+    ((_, k),) = t._segments
+    rng = np.random.default_rng(9)
+    for lo, hi in ((k.x_start - 0.05, k.x_start + 0.3), (0.8, 1.2), (k.x_end - 0.3, k.x_end)):
+        u, y = rng.uniform(lo, hi, 500), rng.uniform(-0.5, 0.5, 500)
+        want = np.asarray(k.expr(u, y, NP), dtype=float) + 0.0 * u
+        assert np.array_equal(k.sharp(u, y), want)
+        assert np.array_equal(k.value_np(u, y), want)
+
+
 def test_the_relief_gradient_is_casadi_s_exact_one():
     """The relief's analytic numpy gradient against CasADi's algorithmic derivative."""
     t = Terrain.from_spec(

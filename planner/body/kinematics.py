@@ -82,33 +82,48 @@ def _foot_and_columns(consts: tuple, th: list) -> tuple[tuple, list]:
 
     ``consts`` from :func:`_leg_floats` (cached per leg by :class:`LegKinematics`): the
     rolling stance feet call this ~60 000 times a walk, where the per-call conversions of
-    the leg's arrays cost as much as the arithmetic.
+    the leg's arrays cost as much as the arithmetic. The joint rotations are written out,
+    each applied to all the points it moves at once (the same arithmetic, in the same
+    order, as applying exp(xi_j th_j) point by point: :func:`_rotate`).
     """
     axes, points, foot = consts
-    cos = [math.cos(t) for t in th]
-    sin = [math.sin(t) for t in th]
-
-    def moved(p, upto):  # exp(xi_1 th_1) ... exp(xi_upto th_upto) p
-        x, y, z = p
-        for j in reversed(range(upto)):
-            (kx, ky, kz), (rx, ry, rz) = axes[j], points[j]
-            vx, vy, vz = x - rx, y - ry, z - rz
-            c, s = cos[j], sin[j]
-            d = (kx * vx + ky * vy + kz * vz) * (1.0 - c)
-            x = vx * c + (ky * vz - kz * vy) * s + kx * d + rx
-            y = vy * c + (kz * vx - kx * vz) * s + ky * d + ry
-            z = vz * c + (kx * vy - ky * vx) * s + kz * d + rz
-        return x, y, z
-
-    px, py, pz = moved(foot, 3)
+    c0, c1, c2 = math.cos(th[0]), math.cos(th[1]), math.cos(th[2])
+    s0, s1, s2 = math.sin(th[0]), math.sin(th[1]), math.sin(th[2])
+    (p1x, p1y, p1z), (p2x, p2y, p2z) = points[1], points[2]
+    (a1x, a1y, a1z), (a2x, a2y, a2z) = axes[1], axes[2]
+    # exp(xi_2 th_2): the foot
+    f = _rotate(axes[2], points[2], c2, s2, foot[0], foot[1], foot[2])
+    # exp(xi_1 th_1): the foot, joint 2's point and axis tip
+    f = _rotate(axes[1], points[1], c1, s1, *f)
+    r2 = _rotate(axes[1], points[1], c1, s1, p2x, p2y, p2z)
+    t2 = _rotate(axes[1], points[1], c1, s1, p2x + a2x, p2y + a2y, p2z + a2z)
+    # exp(xi_0 th_0): all of them and joint 1's point and axis tip
+    px, py, pz = _rotate(axes[0], points[0], c0, s0, *f)
+    r2 = _rotate(axes[0], points[0], c0, s0, *r2)
+    t2 = _rotate(axes[0], points[0], c0, s0, *t2)
+    r1 = _rotate(axes[0], points[0], c0, s0, p1x, p1y, p1z)
+    t1 = _rotate(axes[0], points[0], c0, s0, p1x + a1x, p1y + a1y, p1z + a1z)
+    (a0x, a0y, a0z), r0 = axes[0], points[0]
+    t0 = (r0[0] + a0x, r0[1] + a0y, r0[2] + a0z)
     cols = []
-    for j in range(3):
-        rx, ry, rz = moved(points[j], j)
-        tip = moved([a + b for a, b in zip(points[j], axes[j], strict=True)], j)
+    for (rx, ry, rz), tip in ((r0, t0), (r1, t1), (r2, t2)):
         wx, wy, wz = tip[0] - rx, tip[1] - ry, tip[2] - rz
         dx, dy, dz = px - rx, py - ry, pz - rz
         cols.append((wy * dz - wz * dy, wz * dx - wx * dz, wx * dy - wy * dx))
     return (px, py, pz), cols
+
+
+def _rotate(axis: tuple, point: tuple, c: float, s: float, x: float, y: float, z: float):
+    """exp(xi th) (x, y, z) for a revolute twist (``axis`` through ``point``), Rodrigues."""
+    kx, ky, kz = axis
+    rx, ry, rz = point
+    vx, vy, vz = x - rx, y - ry, z - rz
+    d = (kx * vx + ky * vy + kz * vz) * (1.0 - c)
+    return (
+        vx * c + (ky * vz - kz * vy) * s + kx * d + rx,
+        vy * c + (kz * vx - kx * vz) * s + ky * d + ry,
+        vz * c + (kx * vy - ky * vx) * s + kz * d + rz,
+    )
 
 
 def _solve3(cols, b):

@@ -289,12 +289,41 @@ def _zero_csc(n: int) -> sp.csc_matrix:
     return sp.csc_matrix((n, n))
 
 
-def _csc(a: _Array) -> sp.csc_matrix:
-    """Dense -> CSC without scipy's generic conversion overhead."""
+def _csc(a: _Array) -> _CscView:
+    """Dense -> CSC for Clarabel, without scipy's per-matrix construction and checks.
+
+    The statics and torque SOCPs come in a few sparsity patterns, asked thousands of times
+    a walk (scipy's checks cost more than the solve): a pattern's index arrays are built
+    once (:func:`_csc_pattern`) and each matrix is a :class:`_CscView` of them with its
+    own values, in scipy's canonical CSC form (the same arrays scipy would build).
+    """
     mask = a.T != 0.0
-    cols, rows = np.nonzero(mask)
+    rows, indptr = _csc_pattern(a.shape, mask.tobytes())
+    return _CscView(a.shape, indptr, rows, a.T[mask])
+
+
+class _CscView:
+    """The attributes of a canonical ``scipy.sparse.csc_matrix`` that Clarabel reads."""
+
+    format = "csc"
+    has_canonical_format = True
+
+    def __init__(self, shape: tuple[int, int], indptr, indices, data):
+        self.shape, self.indptr, self.indices, self.data = shape, indptr, indices, data
+        self.nnz = len(data)
+
+    def toarray(self) -> _Array:
+        """The dense matrix (for tests and debugging)."""
+        return sp.csc_matrix((self.data, self.indices, self.indptr), shape=self.shape).toarray()
+
+
+@functools.lru_cache(maxsize=256)
+def _csc_pattern(shape: tuple[int, int], mask_bytes: bytes) -> tuple[_Array, _Array]:
+    """(row indices, column pointers) of the CSC pattern ``mask_bytes`` (of ``a.T != 0``)."""
+    mask = np.frombuffer(mask_bytes, dtype=bool).reshape(shape[1], shape[0])
+    _, rows = np.nonzero(mask)
     indptr = np.concatenate([[0], np.cumsum(mask.sum(axis=1))])
-    return sp.csc_matrix((a.T[mask], rows, indptr), shape=a.shape)
+    return rows.astype(np.int32), indptr.astype(np.int32)
 
 
 # ------------------------------------------------------------------------ eqs. 3-5

@@ -139,8 +139,7 @@ class _ClearanceChecks:
         x0, y0 = flat[:, 0].min() - reach, flat[:, 1].min() - reach
         nx = int(math.ceil((flat[:, 0].max() + reach - x0) / node)) + 1
         ny = int(math.ceil((flat[:, 1].max() + reach - y0) / node)) + 1
-        gx, gy = np.meshgrid(x0 + node * np.arange(nx), y0 + node * np.arange(ny))
-        H = np.asarray(self.terrain.height_sharp(gx, gy), dtype=float).reshape(ny, nx)
+        H = self.terrain.height_sharp_grid(x0 + node * np.arange(nx), y0 + node * np.arange(ny))
         M = maximum_filter(H, size=2 * int(math.ceil(reach / node)) + 1, mode="nearest")
         ix = np.clip(np.rint((flat[:, 0] - x0) / node).astype(int), 0, nx - 1)
         iy = np.clip(np.rint((flat[:, 1] - y0) / node).astype(int), 0, ny - 1)

@@ -373,7 +373,9 @@ class Terrain:
         if 0 < xf.size <= _CHUNK:  # one chunk
             part = fn(xf, yf)
             return [
-                np.array(np.broadcast_to(o, xf.shape), dtype=float).reshape(shape)
+                o.reshape(shape)  # fn's own new array: no copy
+                if isinstance(o, np.ndarray) and o.shape == xf.shape and o.dtype == float
+                else np.array(np.broadcast_to(o, xf.shape), dtype=float).reshape(shape)
                 for o in (part if n_out > 1 else (part,))
             ]
         outs = [np.empty(xf.size) for _ in range(n_out)]
@@ -418,6 +420,25 @@ class Terrain:
             part = slice(i, i + rows)
             for off, k in self._segments:
                 out[part] += k.sharp_offsets(xs[part] - off, ys[part], ox, oy)
+        return out
+
+    def height_sharp_grid(self, xs: Any, ys: Any) -> np.ndarray:
+        """(len(ys), len(xs)) sharp heights [m] on the grid of the node coordinates xs, ys.
+
+        The same as ``height_sharp(xs[None, :], ys[:, None])`` to rounding; a relief's
+        cosines separate in x and y, so a grid costs it a matrix product.
+        """
+        xs = np.asarray(xs, dtype=float).reshape(-1)
+        ys = np.asarray(ys, dtype=float).reshape(-1)
+        out = np.zeros((len(ys), len(xs)))
+        gx, gy = None, None
+        for off, k in self._segments:
+            if k.sharp_grid is not None:
+                out += k.sharp_grid(xs - off, ys)
+                continue
+            if gx is None:
+                gx, gy = np.meshgrid(xs, ys)
+            out += self._apply(lambda xf, yf, k=k, off=off: k.sharp(xf - off, yf), gx, gy, 1)[0]
         return out
 
     def height_gradient(self, x: Any, y: Any) -> tuple[np.ndarray, np.ndarray]:

@@ -34,6 +34,7 @@ from planner.world.terrain_spec import _REQUIRED, _Context, _Fields, _show
 MAX_STONES = 5_000  # stepping stones in one field (each a term of the CasADi expression)
 MAX_ROUGH_CELLS = 2e7  # the grid a rough relief's amplitude is scaled on (a tenth wavelength)
 OFFSET_SETS_KEPT = 8  # offset sets whose e^{i k.d} a relief keeps (Rough.sharp_offsets)
+_TANH_ONE = 25.0  # |x| beyond which tanh(x) is +-1 to the last bit (from 19.1 in float64)
 _LOG_SQRT_EPS_M = 1e-6  # keeps sqrt differentiable where a log's height underflows to 0
 
 
@@ -64,6 +65,8 @@ class _Kind:
     ) -> np.ndarray:
         """(N, M) sharp heights at the N points (u, y) each moved by the M offsets (du, dy)."""
         return self.sharp(u[:, None] + du[None, :], y[:, None] + dy[None, :])
+
+    sharp_grid = None  # (len(y), len(u)) heights on a grid, where a kind has a faster way
 
     def grad_np(self, u: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(dz/dx, dz/dy) of the smooth height by complex-step differentiation (exact)."""
@@ -448,10 +451,39 @@ class _Rough(_Kind):
         """Tapered sum of cosines."""
         return self._window(u, ops) * self._relief(u, y, ops)
 
+    def sharp(self, u: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """The relief has no edges: :meth:`expr` in numpy, the same numbers, in place."""
+        u, y = np.broadcast_arrays(np.asarray(u, float), np.asarray(y, float))
+        arg = u[..., None] * self.kx
+        arg += y[..., None] * self.ky
+        arg += self.phase
+        np.cos(arg, out=arg)
+        arg *= self.a
+        relief = np.sum(arg, axis=-1)
+        if self._inside_taper(u):
+            return relief + 0.0 * u
+        return self._window(u, NP) * relief + 0.0 * u
+
+    value_np = sharp
+
     def _window(self, u: Any, ops: Any) -> Any:
         s = self.taper / 6.0
         h = 0.5 * self.taper
+        if ops is NP and self._inside_taper(u):
+            return np.ones(np.shape(u))
         return _sigmoid(u - (self.x_start + h), s, ops) - _sigmoid(u - (self.x_end - h), s, ops)
+
+    def _inside_taper(self, u: Any) -> bool:
+        """Whether every real u is where the window is exactly 1 (tanh rounds to +-1 there)."""
+        u = np.asarray(u)
+        if u.size == 0 or np.iscomplexobj(u):
+            return False
+        s = self.taper / 6.0
+        h = 0.5 * self.taper
+        return bool(
+            (float(u.min()) - (self.x_start + h)) / s > _TANH_ONE
+            and (float(u.max()) - (self.x_end - h)) / s < -_TANH_ONE
+        )
 
     def grad_np(self, u: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(dz/dx, dz/dy), analytic.
@@ -482,9 +514,23 @@ class _Rough(_Kind):
         cos(a + b) = Re(e^{ia} e^{ib}): a product of an (N, terms) and a (terms, M) matrix
         instead of N M terms cosines.
         """
-        at = np.exp(1j * (u[:, None] * self.kx + y[:, None] * self.ky + self.phase)) * self.a
+        arg = u[:, None] * self.kx + y[:, None] * self.ky + self.phase
+        at = np.empty(arg.shape, complex)  # e^{i arg}: cos and sin, cheaper than exp(1j arg)
+        np.cos(arg, out=at.real)
+        np.sin(arg, out=at.imag)
+        at *= self.a
         relief = (at @ self._offset_factors(du, dy).T).real
         return self._window(u[:, None] + du[None, :], NP) * relief
+
+    def sharp_grid(self, u: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """(len(y), len(u)) heights on a grid: cos(a + b) = Re(e^{ia} e^{ib}) again.
+
+        The x and y factors are one complex exponential per node and term, their product
+        a matrix product (equal to :meth:`sharp` to rounding, ~1e-16 of the amplitude).
+        """
+        ex = np.exp(1j * (u[:, None] * self.kx))
+        ey = np.exp(1j * (y[:, None] * self.ky + self.phase)) * self.a
+        return self._window(u, NP)[None, :] * (ey @ ex.T).real
 
     def _offset_factors(self, du: np.ndarray, dy: np.ndarray) -> np.ndarray:
         """(M, terms) e^{i k.d} of the offsets, kept for the offset sets asked last.
