@@ -22,7 +22,6 @@ from typing import TYPE_CHECKING
 
 import casadi as ca
 import numpy as np
-from scipy.optimize import least_squares
 
 from planner.body import paden_kahan as pk
 from planner.core.units import GRAVITY_M_S2
@@ -471,6 +470,8 @@ class LegKinematics:
         self, leg: int, target, ref, want: int, tol_m: float, n_starts: int = 24
     ) -> IKResult:
         """Bounded least squares from several starts (legs whose hip axes do not meet)."""
+        from scipy.optimize import least_squares  # imported here: ~0.5 s, rarely needed
+
         lg = self.legs[leg]
         lo, hi = lg.lower_rad, lg.upper_rad
         lo_f = np.where(np.isfinite(lo), lo, -np.pi)

@@ -46,7 +46,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.interpolate import CubicSpline
 from scipy.ndimage import distance_transform_edt, maximum_filter, minimum_filter, percentile_filter
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
@@ -314,6 +313,8 @@ def guide_path(
             break
     if 2 < len(kept) < len(pts):  # a spline through the kept corners, if it stays free
         s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(kept, axis=0), axis=1))])
+        from scipy.interpolate import CubicSpline  # imported here: ~0.5 s
+
         smooth = CubicSpline(s, kept, axis=0, bc_type="natural")(
             np.linspace(0.0, s[-1], max(2, int(np.ceil(s[-1] / SPACING_M)) + 1))
         )

@@ -27,8 +27,6 @@ from typing import Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.interpolate import CubicSpline
-from scipy.optimize import minimize_scalar
 
 from planner.core.errors import InputError
 
@@ -89,6 +87,8 @@ class Trajectory:
         """
         pts = _waypoints(waypoints_W, "Trajectory.spline")
         knots = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
+        from scipy.interpolate import CubicSpline  # imported here: ~0.5 s
+
         cs = CubicSpline(knots, pts, axis=0, bc_type=bc_type)
         dcs = cs.derivative()
         return CurveTrajectory("spline", cs, dcs, float(knots[-1]), breaks=knots, waypoints_W=pts)
@@ -315,6 +315,8 @@ class Trajectory:
 
         def f(x: float) -> float:
             return float(np.sum((self.point(x)[:2] - p_xy) ** 2))
+
+        from scipy.optimize import minimize_scalar  # imported here: ~0.5 s, rarely needed
 
         res = minimize_scalar(f, bounds=(a, b), method="bounded", options={"xatol": 1e-12})
         best = float(res.x) if f(res.x) <= d2[k] else float(lam_s[k])
