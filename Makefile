@@ -30,6 +30,10 @@ test: $(STAMP)
 # physics: 9 courses + 20 generated, plan then MuJoCo open/feedback/correct at time scale 1;
 #   ~90 min on 2 cores (a 2 m plan takes 30-60 s since the rolling feet; docs/guide/performance.md);
 #   ladder: one feature per course at growing sizes, the limits table (~20 min);
+#   generated set: 60 generated courses (seeds 0-19 at difficulty 0.6, 1 and 1.3, all seven
+#   kinds), up to 120 s of planning each, then open loop and feedback on the planned ones,
+#   a summary line per difficulty: long, ~2-3 hours on 2 cores (up to 1 h of planning alone;
+#   a planned 3 m course takes ~1.5 min open loop and ~3 min feedback);
 #   speed: planning time per course (median of 5), where it goes, flat 1-8 m (~10 min);
 #   robots: every robot of the list on flat, rough and step courses scaled to it (~15 min)
 bench: $(STAMP)
@@ -38,6 +42,8 @@ bench: $(STAMP)
 	$(VENV)/bin/stratawalk bench physics
 	$(VENV)/bin/stratawalk bench physics --courses ladder --generated 0 --modes open,feedback \
 		--planned-only --time-budget 120 --out bench/results/ladder
+	$(VENV)/bin/stratawalk bench physics --courses generated-set --generated 0 \
+		--modes open,feedback --planned-only --time-budget 120 --out bench/results/generated-set
 	$(VENV)/bin/stratawalk bench speed
 	$(VENV)/bin/stratawalk bench robots
 

@@ -157,7 +157,7 @@ def test_other_lengths_and_bad_arguments():
     for kwargs, option in (
         ({"seed": -1}, "--seed"),
         ({"seed": 1.5}, "--seed"),
-        ({"seed": 1, "difficulty": 1.2}, "--difficulty"),
+        ({"seed": 1, "difficulty": 1.6}, "--difficulty"),
         ({"seed": 1, "length_m": 0.5}, "--length"),
     ):
         with pytest.raises(InputError, match=option):

@@ -23,6 +23,12 @@ machine) and ``physics.md`` (a table per course group and the summary of
 :func:`summarize`) are written at the end. Generated courses are written as YAML to
 ``OUT/courses/`` (the jobs' terrains), ``--save-plans`` writes the plans to ``OUT/plans/``.
 
+``--courses generated-set`` adds the generated set of
+:func:`planner.world.course_gen.generated_set_names` (60 courses: seeds 0..19 at difficulty
+0.6, 1 and 1.3, all seven kinds); its rows have the group ``generated-set`` and a
+``family`` per difficulty (``generated d=0.6``), and the summary a line per family
+(:func:`family_summary`).
+
 A row's ``success`` is: the run reached (:attr:`planner.sim.simulate.Metrics.reached`: open loop
 and correction, the final base within 5 cm of the plan's final base; feedback, the COM
 within 5 cm of the goal) without a fall, and, executing a plan, the plan reached the goal.
@@ -58,6 +64,8 @@ __all__ = [
     "MODES",
     "add_physics_parser",
     "cmd_physics",
+    "expand_physics_courses",
+    "family_summary",
     "physics_jobs",
     "physics_rows",
     "render_markdown",
@@ -77,6 +85,34 @@ TIME_SCALE = 1.0
 WORKERS = 2
 RESULTS_NAME = "physics.jsonl"
 _ID_FIELDS = ("robot", "course", "planner", "start", "goal", "modes", "time_budget_s", "time_scale")
+GENERATED_SET = "generated-set"  # the --courses group of course_gen.generated_set_names
+COURSES_HELP = (
+    COURSE_GROUPS_HELP + ", 'generated-set' = 60 generated courses, seeds 0..19 at "
+    "difficulty 0.6, 1 and 1.3, all seven kinds (course_gen.generated_set_names), a summary "
+    "line per difficulty"
+)
+
+
+def expand_physics_courses(names: Iterable[str]) -> tuple[tuple[str, ...], dict[str, str]]:
+    """The course names with the groups spelled out, and the family of each generated-set course.
+
+    ``generated-set`` becomes :func:`planner.world.course_gen.generated_set_names` (each
+    course's family :func:`planner.world.course_gen.generated_set_family`, e.g.
+    "generated d=0.6"); the other groups are those of
+    :func:`planner.bench.courses.expand_courses`, in the order given.
+    """
+    from planner.world.course_gen import generated_set_family, generated_set_names
+
+    courses: list[str] = []
+    families: dict[str, str] = {}
+    for name in names:
+        if name == GENERATED_SET:
+            for course in generated_set_names():
+                families[course] = generated_set_family(course)
+                courses.append(course)
+        else:
+            courses += expand_courses([name])
+    return tuple(dict.fromkeys(courses)), families
 
 
 # ------------------------------------------------------------------------------ jobs
@@ -109,6 +145,7 @@ def physics_jobs(
     planned_only: bool = False,
     planner: str = "soft",
     preset: str = "default",
+    families: dict[str, str] | None = None,
 ) -> list[dict]:
     """The jobs: ``courses`` (names, paths or ``gen:...`` names), then ``generated`` seeds.
 
@@ -117,7 +154,9 @@ def physics_jobs(
     :func:`planner.world.course_gen.course_goal_xy`, a named course's ``named_goal_xy``.
     ``planned_only``: simulate a plan only when it reached the goal and passes the check.
     ``planner``: the local planner of every plan (soft, recursive or hard); ``preset``:
-    its settings (``stratawalk plan --preset``), "default" the defaults.
+    its settings (``stratawalk plan --preset``), "default" the defaults. ``families``: the
+    generated set's courses and their families (:func:`expand_physics_courses`): their
+    jobs get the group "generated-set" and a ``family`` (not part of the job's id).
     """
     from planner.world.course_gen import (
         course_goal_xy,
@@ -128,6 +167,7 @@ def physics_jobs(
 
     gen = generated_course_names(generated, first_seed, difficulty)
     names = list(dict.fromkeys([*courses, *gen]))
+    families = families or {}
     jobs = []
     for name in names:
         spec = course_spec(name)
@@ -137,11 +177,15 @@ def physics_jobs(
             terrain = str(write_course(spec, Path(out_dir) / "courses").resolve())
             goal = course_goal_xy(spec)
             group = "ladder" if name.startswith("feat:") else "generated"
+            if name in families:
+                group = GENERATED_SET
+        family = {"family": families[name]} if group == GENERATED_SET else {}
         jobs.append(
             {
                 "robot": "littledog",
                 "course": name,
                 "group": group,
+                **family,
                 "terrain": terrain,
                 "planner": planner,
                 "preset": preset,
@@ -210,7 +254,7 @@ def run_physics_job(job: dict) -> dict:
     """
     t0 = time.perf_counter()
     rec: dict[str, Any] = {"id": job_id(job), "job": dict(job), "status": "ok"}
-    head = {"course": job["course"], "group": job["group"]}
+    head = _head(job)
     plan, planning = None, {}
     try:
         from planner.planning.walk import plan_walk
@@ -268,10 +312,18 @@ def run_physics_job(job: dict) -> dict:
     return rec
 
 
+def _head(job: dict) -> dict[str, Any]:
+    """The first columns of a job's rows: course, group and (the generated set's) family."""
+    head = {"course": job["course"], "group": job["group"]}
+    if job.get("family"):
+        head["family"] = job["family"]
+    return head
+
+
 def _failed_record(job: dict, exc: BaseException) -> dict:
     """The record of a job whose worker died: an error row per mode."""
     err = _error(exc)
-    head = {"course": job["course"], "group": job["group"]}
+    head = _head(job)
     rows = [head | {"mode": m, "status": "error", "error": err["error"]} for m in job["modes"]]
     return {"id": job_id(job), "job": dict(job), "planning": err, "rows": rows} | err
 
@@ -292,13 +344,8 @@ def physics_rows(jobs: Sequence[dict], records: dict[str, dict]) -> list[dict]:
         planning = (rec or {}).get("planning", {})
         by_mode = {r["mode"]: r for r in (rec or {}).get("rows", [])}
         for mode in job["modes"]:
-            row = by_mode.get(mode) or {
-                "course": job["course"],
-                "group": job["group"],
-                "mode": mode,
-                "status": "missing",
-            }
-            row = {k: v for k, v in row.items() if k != "traceback"}
+            row = by_mode.get(mode) or _head(job) | {"mode": mode, "status": "missing"}
+            row = {k: v for k, v in row.items() if k != "traceback"} | _head(job)
             row.update({k: planning[k] for k in _PLAN_COLUMNS if k in planning})
             if mode == "feedback" and row.get("com_to_goal_cm") is not None:
                 # the COM at the goal (records of older versions counted the end of a partial plan)
@@ -318,12 +365,14 @@ def summarize(rows: Sequence[dict]) -> dict[str, Any]:
 
     ``named``: per mode, how many named courses succeeded (reached without a fall) of how
     many; ``generated``: how many generated courses the planner reached, and per mode how
-    many of those succeeded and the fraction.
+    many of those succeeded and the fraction; ``ladder``: :func:`ladder_limits`;
+    ``families``: :func:`family_summary` (the generated set's, per difficulty).
     """
     modes = list(dict.fromkeys(r["mode"] for r in rows))
     named = [r for r in rows if r.get("group") == "named"]
     gen = [r for r in rows if r.get("group") == "generated"]
     out: dict[str, Any] = {"named": {}, "generated": {}, "ladder": ladder_limits(rows)}
+    out["families"] = family_summary(rows)
     for mode in modes:
         rs = [r for r in named if r["mode"] == mode]
         if rs:
@@ -340,6 +389,45 @@ def summarize(rows: Sequence[dict]) -> dict[str, Any]:
                 "of": len(rs),
                 "fraction": k / len(rs) if rs else None,
             }
+    return out
+
+
+def family_summary(rows: Sequence[dict]) -> dict[str, Any]:
+    """Per family of the generated set (rows with a ``family``), in the rows' order.
+
+    ``courses``: how many; ``planned``: how many the planner planned within the time budget
+    (the plan reached the goal and passes the check); ``errors``: courses with an error
+    row. Per mode, over the planned courses' rows: ``runs`` (simulated, without error),
+    ``reached`` (reached without a fall: a row's ``success``), ``fell``; open loop also
+    ``within_5cm`` (the final base within 5 cm of the plan's final base, fall or not).
+    """
+    out: dict[str, Any] = {}
+    for family in dict.fromkeys(r["family"] for r in rows if r.get("family")):
+        rs = [r for r in rows if r.get("family") == family]
+        courses = list(dict.fromkeys(r["course"] for r in rs))
+        planned = list(dict.fromkeys(r["course"] for r in rs if r.get("planned")))
+        errors = list(dict.fromkeys(r["course"] for r in rs if r.get("status") == "error"))
+        entry: dict[str, Any] = {
+            "courses": len(courses),
+            "planned": len(planned),
+            "errors": len(errors),
+            "modes": {},
+        }
+        for mode in dict.fromkeys(r["mode"] for r in rs):
+            ran = [
+                r for r in rs if r["mode"] == mode and r.get("planned") and r.get("status") == "ok"
+            ]
+            m = {
+                "runs": len(ran),
+                "reached": sum(bool(r.get("success")) for r in ran),
+                "fell": sum(bool(r.get("fell")) for r in ran),
+            }
+            if mode == "open":
+                m["within_5cm"] = sum(
+                    r.get("final_error_cm") is not None and r["final_error_cm"] <= 5.0 for r in ran
+                )
+            entry["modes"][mode] = m
+        out[family] = entry
     return out
 
 
@@ -449,6 +537,8 @@ def _summary_lines(s: dict[str, Any]) -> list[str]:
         for mode, v in g["modes"].items():
             frac = "-" if v["fraction"] is None else f"{100 * v['fraction']:.0f} %"
             lines.append(f"  - {MODE_NAMES.get(mode, mode)}: {v['success']} of {v['of']} ({frac})")
+    for family, e in (s.get("families") or {}).items():
+        lines.append(_family_line(family, e))
     ladder = s.get("ladder") or {}
     if ladder:
         sizes = [c for e in ladder.values() for c in e["sizes"].values()]
@@ -459,11 +549,35 @@ def _summary_lines(s: dict[str, Any]) -> list[str]:
     return lines
 
 
+def _family_line(family: str, e: dict[str, Any]) -> str:
+    """One summary line of a generated-set family."""
+    parts = []
+    for mode, m in e["modes"].items():
+        text = f"{MODE_NAMES.get(mode, mode)} {m['reached']} reached, {m['fell']} fell"
+        if "within_5cm" in m:
+            text += f", {m['within_5cm']} within 5 cm"
+        parts.append(text + f" (of {m['runs']} runs)")
+    errors = f", {e['errors']} with errors" if e.get("errors") else ""
+    return (
+        f"- {family}: {e['courses']} courses, {e['planned']} planned within the budget"
+        f"{errors}; " + "; ".join(parts)
+    )
+
+
 _PLANNER_NAMES = {
     "soft": "Soft local planner (8.2)",
     "recursive": "Recursive local planner (8.5)",
     "hard": "Hard-persuasion local planner (8.1)",
 }
+
+
+def _difficulties(result: dict[str, Any]) -> str:
+    """The generated courses' difficulty: the configuration's, and the generated set's."""
+    text = f"{result['config']['difficulty']:g}"
+    families = list((result.get("summary") or {}).get("families") or {})
+    if families:
+        text += "; the generated set: " + ", ".join(families)
+    return text
 
 
 def render_markdown(result: dict[str, Any]) -> str:
@@ -479,7 +593,7 @@ def render_markdown(result: dict[str, Any]) -> str:
         f"named courses"
         + own_goals_text(c.get("courses", ()))
         + f", to the end of the course minus 0.4 m on the generated ones "
-        f"(`planner/world/course_gen.py`, difficulty {c['difficulty']:g}), time budget "
+        f"(`planner/world/course_gen.py`, difficulty {_difficulties(result)}), time budget "
         f"{c['time_budget_s']:g} s; each plan executed in MuJoCo at time scale "
         f"{c['time_scale']:g}: {', '.join(MODE_NAMES.get(x, x) for x in c['modes'])}. "
         f"{c['workers']} jobs at once; {m.get('nproc')} cores ({m.get('cpu') or 'cpu unknown'}), "
@@ -504,6 +618,10 @@ def render_markdown(result: dict[str, Any]) -> str:
         rows = [r for r in result["rows"] if r.get("group") == group]
         if rows:
             lines += [f"## {title}", "", *_table(rows), ""]
+    set_rows = [r for r in result["rows"] if r.get("group") == GENERATED_SET]
+    for family in dict.fromkeys(r.get("family", "generated set") for r in set_rows):
+        rows = [r for r in set_rows if r.get("family", "generated set") == family]
+        lines += [f"## Generated set: {family}", "", *_table(rows), ""]
     limits = result["summary"].get("ladder")
     if limits:
         lines += [
@@ -604,6 +722,7 @@ def run_physics_bench(
     planned_only: bool = False,
     planner: str = "soft",
     preset: str = "default",
+    families: dict[str, str] | None = None,
 ) -> dict[str, Any]:
     """Run the benchmark's jobs and write ``physics.{jsonl,json,md}`` to ``out_dir``.
 
@@ -633,6 +752,7 @@ def run_physics_bench(
         planned_only=planned_only,
         planner=planner,
         preset=preset,
+        families=families,
     )
     machine = machine_info()
     t0 = time.perf_counter()
@@ -667,7 +787,7 @@ def add_physics_parser(bench_sub) -> argparse.ArgumentParser:
     p.add_argument(
         "--courses",
         default="named",
-        help=COURSE_GROUPS_HELP,
+        help=COURSES_HELP,
     )
     p.add_argument("--generated", type=int, default=GENERATED, help="generated courses")
     p.add_argument("--first-seed", type=int, default=0, help="seed of the first generated course")
@@ -676,7 +796,12 @@ def add_physics_parser(bench_sub) -> argparse.ArgumentParser:
         action="store_true",
         help="simulate only plans that reached the goal and pass the check",
     )
-    p.add_argument("--difficulty", type=float, default=1.0, help="of the generated courses, 0..1")
+    p.add_argument(
+        "--difficulty",
+        type=float,
+        default=1.0,
+        help="of the --generated courses, 0..1.5 (above 1: sizes past the maxima)",
+    )
     p.add_argument("--modes", default=",".join(MODES), help="open,feedback,correct")
     p.add_argument(
         "--planner", default="soft", choices=["soft", "recursive", "hard"], help="local planner"
@@ -705,7 +830,7 @@ def cmd_physics(args) -> int:
     check_folder(args.out, "--out")
     from planner.world.course_gen import course_spec
 
-    courses = expand_courses(_names(args.courses))
+    courses, families = expand_physics_courses(_names(args.courses))
     modes = _names(args.modes)
     bad = [m for m in modes if m not in MODES]
     if bad:
@@ -720,8 +845,10 @@ def cmd_physics(args) -> int:
         raise InputError("--courses: give at least one course, or --generated N")
     for name in courses:
         course_spec(name)  # a malformed gen:/feat: name fails here, not in a job
-    if not 0.0 <= args.difficulty <= 1.0:
-        raise InputError(f"--difficulty: must be in [0, 1], got {args.difficulty}")
+    from planner.world.course_gen import MAX_DIFFICULTY
+
+    if not 0.0 <= args.difficulty <= MAX_DIFFICULTY:
+        raise InputError(f"--difficulty: must be in [0, {MAX_DIFFICULTY:g}], got {args.difficulty}")
     if not args.time_budget > 0:
         raise InputError(f"--time-budget: must be > 0 s, got {args.time_budget}")
     if not args.time_scale > 0:
@@ -752,6 +879,7 @@ def cmd_physics(args) -> int:
             planned_only=args.planned_only,
             planner=args.planner,
             preset=args.preset,
+            families=families,
         )
     print(render_markdown(result))
     print(f"wrote {Path(args.out) / 'physics.md'} and physics.json, physics.jsonl", file=sys.stderr)

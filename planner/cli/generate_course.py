@@ -27,7 +27,9 @@ def add_generate_parser(subparsers) -> argparse.ArgumentParser:
         "generate-course", help="write a seeded random course (steps, gaps, stairs, ...) as YAML"
     )
     g.add_argument("--seed", type=int, default=0, help="random seed (integer >= 0)")
-    g.add_argument("--difficulty", type=float, default=1.0, help="0 (easy) .. 1 (maxima)")
+    g.add_argument(
+        "--difficulty", type=float, default=1.0, help="0 (easy) .. 1 (maxima) .. 1.5 (past them)"
+    )
     g.add_argument(
         "--length", type=float, default=DEFAULT_LENGTH_M, help="[m] x where the features end"
     )

@@ -19,14 +19,25 @@
 
 Levels stack (a step or stairs leaves the ground higher or lower for what follows; see
 :mod:`planner.world.terrain`); the sign of each level change is chosen so that the ground stays
-within ``MAX_LEVEL_M`` of the start. ``difficulty`` d in [0, 1] scales every size (heights,
-depths, widths, amplitudes, stone gaps and jitter): a feature's size is
-easy + d * u * (maximum - easy), u ~ U(0.6, 1) (``_SIZES``). Every course keeps friction 0.7
-(rubber on wood or plastic, as the named courses), ``x_min`` -0.5 and y in [-0.6, 0.6].
+within ``MAX_LEVEL_M`` of the start. ``difficulty`` d in [0, ``MAX_DIFFICULTY``] = [0, 1.5]
+scales every size (heights, depths, widths, amplitudes, stone gaps and jitter; stone sizes
+and stair runs shrink): a feature's size is easy + d * u * (maximum - easy), u ~ U(0.6, 1)
+(``_SIZES``). Every course keeps friction 0.7 (rubber on wood or plastic, as the named
+courses), ``x_min`` -0.5 and y in [-0.6, 0.6].
+
+Above 1 the same law goes past the maxima above by (d - 1) u (maximum - easy): at d = 1.3
+steps up to about 10 cm (0.02 + 1.3 * 0.06 m), trenches up to 10 cm wide, stair rises up to
+7.2 cm on runs down to 17 cm, stones down to 7.5 cm with gaps up to 5.9 cm, inclines up to
+22 degrees, barriers up to 11 cm, relief up to about 7 cm; at 1.5 steps up to 11 cm. A
+flight of three whose total rise would exceed ``MAX_LEVEL_M`` has two steps (only above
+d = 1: three rises of at most 6 cm stay within it), so the level bound holds at every
+difficulty; the 8 cm bound on edges above holds only for d <= 1. For d <= 1 the draws are those of
+the generator before d > 1 was allowed: ``gen:SEED`` and ``gen:SEED:D`` name the same
+courses as in the benchmarks' results.
 
 A generated course is named ``gen:SEED`` (difficulty 1, length 3 m) or
-``gen:SEED:DIFFICULTY[:LENGTH]``; :func:`write_course` writes it as YAML, which
-``stratawalk plan --terrain`` and batch jobs accept as a path.
+``gen:SEED:DIFFICULTY[:LENGTH[:KIND+KIND...]]``; :func:`write_course` writes it as YAML,
+which ``stratawalk plan --terrain`` and batch jobs accept as a path.
 
 Two more kinds, ``incline`` (a ramp up or down, up to ``MAX_INCLINE_DEG``) and
 ``barrier`` (a wall to step over, up to ``MAX_BARRIER_M`` high), are drawn only when asked
@@ -39,6 +50,14 @@ a given size (``feat:KIND:SIZE``, e.g. ``feat:step:0.1``, ``feat:gap:0.12``,
 past its last edge (:func:`course_goal_xy`). :data:`LADDER` lists the sizes of the limits
 table (``stratawalk bench physics --courses ladder``): the largest step, trench, incline,
 barrier, stair rise and stone gap the planner reaches.
+
+The generated set (:func:`generated_set_names`, ``stratawalk bench physics --courses
+generated-set``): seeds 0..19 at each of the difficulties 0.6, 1.0 and 1.3 (60 courses),
+3 m long, drawn from all seven kinds (``gen:SEED:D:3:rough+step+...+barrier``); each
+difficulty is a family (``generated d=0.6``, :func:`generated_set_family`) with a summary
+line of its own. The same seed at the three difficulties draws the same numbers, so its
+course mostly keeps its order of features and grows its sizes (a longer feature may no
+longer fit, and the deck then moves on).
 """
 
 from __future__ import annotations
@@ -65,6 +84,8 @@ __all__ = [
     "parse_feature_name",
     "generate_course",
     "generated_course_names",
+    "generated_set_family",
+    "generated_set_names",
     "parse_course_name",
     "write_course",
 ]
@@ -85,6 +106,7 @@ MAX_STAIR_RISE_M = 0.06
 MAX_INCLINE_DEG = 18.0
 MAX_BARRIER_M = 0.09
 MAX_LEVEL_M = 0.2  # |ground level| stays below this
+MAX_DIFFICULTY = 1.5  # above 1: sizes past the maxima (module docstring)
 _MIN_FEATURE_M = 0.45  # the shortest feature segment (step, gap)
 MAX_MISFITS = 100_000  # draws in a row that do not fit (~2 s): the kinds are too long, stop
 _PREFIX = "gen"
@@ -168,6 +190,9 @@ def _feature(kind: str, rng: np.random.Generator, d: float, level_m: float) -> d
         count = int(rng.integers(2, 4))
         rise = _size(rng, "stair_rise_m", d)
         run = _r(_size(rng, "stair_run_m", d))
+        # above d = 1 three rises may exceed MAX_LEVEL_M (3 x 8 cm at 1.5): one step fewer,
+        # so that a direction keeping the level within it exists (never at d <= 1: 3 x 6 cm)
+        count = min(count, int(MAX_LEVEL_M / rise + 1e-9))
         return {
             "kind": "stairs",
             "length": _r(0.15 + count * run + 0.1),
@@ -256,8 +281,8 @@ def _check_kinds(kinds) -> tuple[str, ...]:
 def _check_args(seed: Any, length_m: float, difficulty: float) -> None:
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise InputError(f"--seed: expected an integer >= 0, got {seed!r}")
-    if not (isinstance(difficulty, (int, float)) and 0.0 <= difficulty <= 1.0):
-        raise InputError(f"--difficulty: must be in [0, 1], got {difficulty!r}")
+    if not (isinstance(difficulty, (int, float)) and 0.0 <= difficulty <= MAX_DIFFICULTY):
+        raise InputError(f"--difficulty: must be in [0, {MAX_DIFFICULTY:g}], got {difficulty!r}")
     if not (isinstance(length_m, (int, float)) and math.isfinite(length_m)):
         raise InputError(f"--length: expected metres, got {length_m!r}")
     if length_m < MIN_LENGTH_M:
@@ -280,7 +305,8 @@ def generate_course(
         x where the features end and the final 0.4 m of flat ground begins (the goal of a
         walk over the course); features start at x = 0.6 m. At least 1 m.
     difficulty
-        In [0, 1]: 0 gives the easy sizes, 1 up to the maxima (module docstring).
+        In [0, 1.5]: 0 gives the easy sizes, 1 up to the maxima, above 1 past them
+        (module docstring).
     kinds
         The feature kinds of the deck: some of ``FEATURE_KINDS + EXTRA_KINDS``. Other
         than the default, the course's name gets them (``gen:SEED:D:L:KIND+KIND``).
@@ -370,6 +396,47 @@ def generated_course_names(n: int, seed0: int = 0, difficulty: float = 1.0) -> l
     return [course_name(s, difficulty) for s in range(seed0, seed0 + n)]
 
 
+GENERATED_SET_DIFFICULTIES = (0.6, 1.0, 1.3)
+GENERATED_SET_PER_DIFFICULTY = 20
+GENERATED_SET_LENGTH_M = 3.0
+
+
+def generated_set_names(
+    per_difficulty: int = GENERATED_SET_PER_DIFFICULTY,
+    difficulties: tuple[float, ...] = GENERATED_SET_DIFFICULTIES,
+    kinds: tuple[str, ...] = FEATURE_KINDS + EXTRA_KINDS,
+    length_m: float = GENERATED_SET_LENGTH_M,
+) -> list[str]:
+    """The generated set: seeds 0 .. ``per_difficulty`` - 1 at each difficulty, in that order.
+
+    The default is 60 names ``gen:SEED:D:3:rough+step+gap+stairs+stepping_stones+incline+
+    barrier``, D in 0.6, 1, 1.3 (``stratawalk bench physics --courses generated-set``); the
+    same seeds at every difficulty (module docstring).
+
+    Raises
+    ------
+    InputError
+        A difficulty outside [0, 1.5], an unknown kind or a length below 1 m.
+
+    """
+    kinds = _check_kinds(kinds)
+    for d in difficulties:
+        _check_args(0, length_m, d)
+    return [
+        course_name(seed, float(d), float(length_m), kinds)
+        for d in difficulties
+        for seed in range(int(per_difficulty))
+    ]
+
+
+def generated_set_family(name: str) -> str:
+    """The family of a generated course in the set's summaries: ``generated d=D``."""
+    parsed = parse_course_name(name)
+    if parsed is None:
+        raise InputError(f"course '{name}': not a generated course name (gen:SEED...)")
+    return f"generated d={parsed[1]:g}"
+
+
 def parse_course_name(name: str) -> tuple[int, float, float, tuple[str, ...]] | None:
     """(seed, difficulty, length_m, kinds) of ``gen:SEED[:DIFFICULTY[:LENGTH[:KINDS]]]``.
 
@@ -404,12 +471,13 @@ def parse_course_name(name: str) -> tuple[int, float, float, tuple[str, ...]] | 
 # ------------------------------------------------------------------------------ the ladder
 # the sizes of the limits table: steps [m] (< 0 down), trench widths [m] (8 cm deep),
 # inclines [deg] (up), barrier heights [m], stair rises [m] (3 steps of 20 cm; < 0 down),
-# gaps between 8 cm stepping stones [m] (the pit 8 cm deep)
+# gaps between 8 cm stepping stones [m] (the pit 8 cm deep); issue 65's sizes (step up 11 cm,
+# barrier 10 cm) added between the earlier ones, which the results tables refer to
 LADDER = {
-    "step": (0.06, 0.08, 0.1, 0.12, -0.06, -0.08, -0.1, -0.12),
+    "step": (0.06, 0.08, 0.1, 0.11, 0.12, -0.06, -0.08, -0.1, -0.12),
     "gap": (0.04, 0.08, 0.12, 0.16),
     "incline": (6.0, 12.0, 18.0, 24.0),
-    "barrier": (0.03, 0.06, 0.09, 0.12),
+    "barrier": (0.03, 0.06, 0.09, 0.1, 0.12),
     "stairs": (0.04, 0.06, 0.08, -0.04, -0.06, -0.08),
     "stones": (0.03, 0.05, 0.07),
 }
