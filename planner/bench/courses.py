@@ -9,6 +9,14 @@ time / execution time; below 1 the planner is faster than the robot). Results st
 ``courses.jsonl`` (``--resume`` continues an interrupted run) and are summarised in
 ``courses.md`` and ``courses.json`` in the output folder.
 
+``--start-offsets 1e-6,1e-3`` (issue 65: success must not hinge on rounding) repeats every
+walk from the start moved by each distance in +x, -x, +y, -y (the planner's own start
+argument; it finds the initial stance there): 1 + 4 x N jobs per course and planner, the
+unmoved one with the id it has without the option. The table gets a start-offset column and
+the summary a robustness section per planner (:func:`robustness`): at how many starts each
+course reached the goal and passed the check, how many courses plan from every start, and
+the courses whose outcome differs between starts (the rounding-fragile ones).
+
 Planning times are wall-clock times of the local planner inside its job, measured with
 ``--workers`` jobs at once on the machine (the JSON records the machine and its load).
 """
@@ -17,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 import time
@@ -33,7 +42,11 @@ __all__ = [
     "COURSE_GROUPS_HELP",
     "HARD_COURSES",
     "PLANNERS",
+    "START_DIRECTIONS",
     "expand_courses",
+    "parse_start_offsets",
+    "robustness",
+    "start_label",
     "own_goals_text",
     "goal_for",
     "add_courses_parser",
@@ -76,6 +89,13 @@ PLANNERS = ("soft", "recursive")
 ROBOTS = ("littledog",)
 START_XY = (0.2, 0.0)
 GOAL_XY = (2.2, 0.0)
+# --start-offsets: the start moved by each distance along these unit vectors
+START_DIRECTIONS = (
+    ("+x", (1.0, 0.0)),
+    ("-x", (-1.0, 0.0)),
+    ("+y", (0.0, 1.0)),
+    ("-y", (0.0, -1.0)),
+)
 # [s] per plan: the rolling feet and per-sample torque checks make planning ~5x slower
 # than without them
 TIME_BUDGET_S = 240.0
@@ -121,6 +141,67 @@ def goal_for(course: str, default=GOAL_XY) -> tuple[float, float]:
     return float(g[0]), float(g[1])
 
 
+def parse_start_offsets(text: str, start_xy=START_XY) -> tuple[float, ...]:
+    """The distances of ``--start-offsets`` ("1e-6,1e-3"), in metres, duplicates dropped.
+
+    Raises
+    ------
+    InputError
+        One line naming ``--start-offsets``: a word that is no number, a distance that is
+        not finite and > 0, or one too small to move ``start_xy`` in float64.
+
+    """
+    from planner.core.errors import InputError
+
+    words = [w.strip() for w in str(text).split(",") if w.strip()]
+    if not words:
+        raise InputError("--start-offsets: give distances in metres, comma-separated (1e-6,1e-3)")
+    out = []
+    for w in words:
+        try:
+            v = float(w)
+        except ValueError:
+            raise InputError(
+                f"--start-offsets: '{w}' is not a number; give distances in metres, "
+                "comma-separated (1e-6,1e-3)"
+            ) from None
+        if not (math.isfinite(v) and v > 0):
+            raise InputError(f"--start-offsets: each distance must be finite and > 0 m, got {w}")
+        moved = [(start_xy[0] + v * ux, start_xy[1] + v * uy) for _, (ux, uy) in START_DIRECTIONS]
+        if any(tuple(m) == (float(start_xy[0]), float(start_xy[1])) for m in moved):
+            raise InputError(
+                f"--start-offsets: {w} m does not move the start {tuple(start_xy)} in float64 "
+                "arithmetic; give a larger distance"
+            )
+        out.append(v)
+    return tuple(dict.fromkeys(out))
+
+
+def _starts(start_xy, start_offsets) -> list[tuple[list[float], list[float]]]:
+    """(start, offset) pairs: the unmoved start, then each distance in each direction."""
+    x0, y0 = float(start_xy[0]), float(start_xy[1])
+    out = [([x0, y0], [0.0, 0.0])]
+    for d in start_offsets:
+        for _, (ux, uy) in START_DIRECTIONS:
+            dx, dy = float(d) * ux, float(d) * uy
+            out.append(([x0 + dx, y0 + dy], [dx, dy]))
+    return out
+
+
+def start_label(offset) -> str:
+    """A start offset [dx, dy] as the table writes it: '0', '+x 1e-06', '-y 0.001'."""
+    if offset is None:
+        return "-"
+    dx, dy = float(offset[0]), float(offset[1])
+    if dx == 0 and dy == 0:
+        return "0"
+    if dy == 0:
+        return f"{'+' if dx > 0 else '-'}x {abs(dx):g}"
+    if dx == 0:
+        return f"{'+' if dy > 0 else '-'}y {abs(dy):g}"
+    return f"({dx:g}, {dy:g})"
+
+
 def course_jobs(
     robots=ROBOTS,
     courses=COURSES,
@@ -129,27 +210,41 @@ def course_jobs(
     goal_xy=GOAL_XY,
     time_budget_s: float = TIME_BUDGET_S,
     seed: int = 0,
+    start_offsets=(),
 ) -> list[dict]:
-    """The batch jobs of the table, robot-major then course then planner."""
-    return [
-        DEFAULTS
-        | {
-            "robot": r,
-            "terrain": c,
-            "planner": p,
-            "start": [float(start_xy[0]), float(start_xy[1])],
-            "goal": list(goal_for(c, goal_xy)),
-            "seed": int(seed),
-            "time_budget_s": float(time_budget_s),
-        }
-        for r in robots
-        for c in courses
-        for p in planners
-    ]
+    """The batch jobs of the table, robot-major then course then planner.
+
+    With ``start_offsets`` (metres) each (robot, course, planner) is followed by its walks
+    from the start moved by each distance in +x, -x, +y, -y (:data:`START_DIRECTIONS`), and
+    every job carries its ``start_offset`` [dx, dy] ([0, 0] for the unmoved one, whose job
+    id is the one without offsets: the id hashes the start, not the offset).
+    """
+    starts = _starts(start_xy, start_offsets)
+    jobs = []
+    for r in robots:
+        for c in courses:
+            goal = list(goal_for(c, goal_xy))
+            for p in planners:
+                for start, offset in starts:
+                    job = DEFAULTS | {
+                        "robot": r,
+                        "terrain": c,
+                        "planner": p,
+                        "start": list(start),
+                        "goal": list(goal),
+                        "seed": int(seed),
+                        "time_budget_s": float(time_budget_s),
+                    }
+                    if start_offsets:
+                        job["start_offset"] = list(offset)
+                    jobs.append(job)
+    return jobs
 
 
 def _row(job: dict, rec: dict | None) -> dict[str, Any]:
     row = {k: job[k] for k in ("robot", "terrain", "planner")}
+    if "start_offset" in job:
+        row["start_offset"] = list(job["start_offset"])
     if rec is None:
         return row | {"status": "missing"}
     row["status"] = rec.get("status")
@@ -183,11 +278,16 @@ def run_course_bench(
     workers: int | None = None,
     resume: bool = False,
     progress: bool = True,
+    start_offsets=(),
+    goal_xy=GOAL_XY,
 ) -> dict[str, Any]:
     """Run the table's jobs and write ``courses.{jsonl,json,md}`` to ``out_dir``.
 
     Without ``resume`` an old ``courses.jsonl`` is replaced; with it, finished jobs are
-    kept and only the others run. Returns the content of ``courses.json``.
+    kept and only the others run. ``start_offsets`` (metres): each walk also from the start
+    moved by each in +x, -x, +y, -y (:func:`course_jobs`); the result then has them in its
+    config and a ``robustness`` (:func:`robustness`). ``goal_xy``: the goal of the courses
+    without their own. Returns the content of ``courses.json``.
     """
     from planner.core.machine import machine_info
 
@@ -196,7 +296,15 @@ def run_course_bench(
     results = out / "courses.jsonl"
     if not resume and results.exists():
         results.unlink()
-    jobs = course_jobs(robots, courses, planners, time_budget_s=time_budget_s)
+    start_offsets = tuple(float(d) for d in start_offsets)
+    jobs = course_jobs(
+        robots,
+        courses,
+        planners,
+        goal_xy=goal_xy,
+        time_budget_s=time_budget_s,
+        start_offsets=start_offsets,
+    )
     machine = machine_info()
     t0 = time.perf_counter()
     summary = run_batch(
@@ -215,7 +323,7 @@ def run_course_bench(
             "courses": list(courses),
             "planners": list(planners),
             "start": list(START_XY),
-            "goal": list(GOAL_XY),
+            "goal": [float(goal_xy[0]), float(goal_xy[1])],
             "time_budget_s": time_budget_s,
             "scheduler": scheduler,
             "workers": workers or os.cpu_count(),
@@ -225,6 +333,9 @@ def run_course_bench(
         "interrupted": summary.interrupted,
         "rows": rows,
     }
+    if start_offsets:
+        result["config"]["start_offsets"] = list(start_offsets)
+        result["robustness"] = robustness(rows)
     text = json.dumps(result, indent=1, allow_nan=False) + "\n"
     write_atomic(out / "courses.json", lambda p: p.write_text(text))
     write_atomic(out / "courses.md", lambda p: p.write_text(render_markdown(result)))
@@ -242,9 +353,99 @@ def _backtracks(row: dict) -> str:
     return f"{row['backtracks']} / {row.get('retraces', 0)}"
 
 
+def _planned(row: dict) -> bool:
+    """The row's walk reached the goal and its plan passed the check."""
+    return row.get("status") == "ok" and bool(row.get("reached")) and bool(row.get("validated"))
+
+
+def robustness(rows) -> dict[str, dict[str, Any]]:
+    """Per planner, per course: at how many of its starts the walk was planned.
+
+    Planned = reached the goal and passed the check (:func:`_planned`). For each planner:
+    ``courses``, one entry per (robot, course) in row order with ``starts`` (its rows),
+    ``planned``, ``missing`` (no result: an interrupted run), ``not_from`` (the labels of
+    the starts with a result that did not plan), ``robust`` (planned from every start) and
+    ``fragile`` (the outcome differs between the starts with a result); ``robust`` and
+    ``of``: the count of robust courses and of courses; ``fragile``: those courses' names
+    ("course" with one robot, "course (robot)" with more).
+    """
+    robots = {r["robot"] for r in rows}
+    out: dict[str, dict[str, Any]] = {}
+    for r in rows:
+        per = out.setdefault(r["planner"], {"courses": {}})["courses"]
+        name = r["terrain"] if len(robots) == 1 else f"{r['terrain']} ({r['robot']})"
+        e = per.setdefault(
+            name,
+            {"robot": r["robot"], "course": r["terrain"], "starts": 0, "planned": 0,
+             "missing": 0, "not_from": [], "outcomes": set()},
+        )  # fmt: skip
+        e["starts"] += 1
+        if r.get("status") in (None, "missing"):
+            e["missing"] += 1
+            continue
+        ok = _planned(r)
+        e["planned"] += ok
+        e["outcomes"].add(ok)
+        if not ok:
+            e["not_from"].append(start_label(r.get("start_offset", [0.0, 0.0])))
+    for planner, s in out.items():
+        courses = []
+        for name, e in s["courses"].items():
+            outcomes = e.pop("outcomes")
+            e["name"] = name
+            e["robust"] = e["planned"] == e["starts"]
+            e["fragile"] = len(outcomes) > 1
+            courses.append(e)
+        out[planner] = {
+            "courses": courses,
+            "robust": sum(e["robust"] for e in courses),
+            "of": len(courses),
+            "fragile": [e["name"] for e in courses if e["fragile"]],
+        }
+    return out
+
+
+def _robustness_lines(result: dict[str, Any]) -> list[str]:
+    """The robustness section of ``courses.md`` (with ``--start-offsets``)."""
+    offsets = result["config"].get("start_offsets") or []
+    rob = result.get("robustness") or robustness(result["rows"])
+    lines = [
+        f"## Robustness to the start (--start-offsets {','.join(f'{d:g}' for d in offsets)})",
+        "",
+        f"Each walk also from the start moved by {', '.join(f'{d:g}' for d in offsets)} m in "
+        "+x, -x, +y, -y. planned = reached the goal and passed `stratawalk check`; robust = "
+        "planned from every start; fragile = the outcome differs between starts (success "
+        "hinges on rounding).",
+    ]
+    for planner, s in rob.items():
+        lines += [
+            "",
+            f"### {planner}",
+            "",
+            "| course | planned from | robust | fragile | not planned from |",
+            "|---|---:|---|---|---|",
+        ]
+        for e in s["courses"]:
+            left = f" ({e['missing']} without a result)" if e["missing"] else ""
+            lines.append(
+                f"| {e['name']} | {e['planned']} of {e['starts']}{left} | "
+                f"{'yes' if e['robust'] else 'no'} | {'yes' if e['fragile'] else 'no'} | "
+                f"{', '.join(e['not_from']) or '-'} |"
+            )
+        lines += [
+            "",
+            f"{planner}: {s['robust']} of {s['of']} courses plan from every start; "
+            "outcome differs between starts: " + (", ".join(s["fragile"]) or "none") + ".",
+        ]
+    return [*lines, ""]
+
+
 def render_markdown(result: dict[str, Any]) -> str:
     """The table of ``courses.md``."""
     c, m = result["config"], result["machine"]
+    offsets = c.get("start_offsets") or []
+    # with --start-offsets: a start-offset column after the planner's
+    so_head, so_rule = (" start offset [m] |", "---|") if offsets else ("", "")
     lines = [
         "# Course benchmark (`stratawalk bench courses`)",
         "",
@@ -262,7 +463,13 @@ def render_markdown(result: dict[str, Any]) -> str:
         f"{m['load_average_1_5_15_at_start']}, commit {m['git_commit'] or '?'}, {m['date']}. "
         f"Total {result['total_time_s']:.0f} s"
         + (" (interrupted: rows marked missing)" if result["interrupted"] else "")
-        + ".",
+        + "."
+        + (
+            f" Each walk also from the start moved by {', '.join(f'{d:g}' for d in offsets)} m "
+            f"in +x, -x, +y, -y ({1 + 4 * len(offsets)} starts per course and planner)."
+            if offsets
+            else ""
+        ),
         "",
         "reached = the COM within 5 cm of the goal *and* the plan passes `stratawalk check`; "
         "ratio = planning time / time the walk takes to execute; job = wall time of the whole "
@@ -272,16 +479,17 @@ def render_markdown(result: dict[str, Any]) -> str:
         "for soft, its retraces (dead ends traced back a crawl cycle or more, 8.5's "
         "tracing back inside 8.2); greedy is 8.2 as the paper has it, without them.",
         "",
-        "| robot | course | planner | reached | validated | steps | planning [s] | job [s] "
-        "| walk [s] | ratio | left [m] | backtracks / retraces | note |",
-        "|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---|",
+        f"| robot | course | planner |{so_head} reached | validated | steps | planning [s] "
+        "| job [s] | walk [s] | ratio | left [m] | backtracks / retraces | note |",
+        f"|---|---|---|{so_rule}---|---|---:|---:|---:|---:|---:|---:|---:|---|",
     ]
     for r in result["rows"]:
+        so = f" {start_label(r.get('start_offset'))} |" if offsets else ""
         if r["status"] != "ok":
             note = r.get("error") or r["status"]
             lines.append(
-                f"| {r['robot']} | {r['terrain']} | {r['planner']} | - | - | - | - | - | - | - | - "
-                f"| - | {note[:80]} |"
+                f"| {r['robot']} | {r['terrain']} | {r['planner']} |{so} - | - | - | - | - | - | "
+                f"- | - | - | {note[:80]} |"
             )
             continue
         note = "" if r["reached"] else r.get("message", "")[:80]
@@ -292,7 +500,7 @@ def render_markdown(result: dict[str, Any]) -> str:
                 + ", ".join(f"{k} {v}" for k, v in r["violations"].items())
             )
         lines.append(
-            f"| {r['robot']} | {r['terrain']} | {r['planner']} | "
+            f"| {r['robot']} | {r['terrain']} | {r['planner']} |{so} "
             f"{'yes' if r['reached'] else 'no'} | {'yes' if r['validated'] else 'no'} | "
             f"{r['steps']} | {_f(r.get('planning_time_s'), '.1f')} | "
             f"{_f(r.get('wall_time_s'), '.1f')} | {_f(r.get('walk_time_s'), '.1f')} | "
@@ -306,6 +514,8 @@ def render_markdown(result: dict[str, Any]) -> str:
         f"Reached: {sum(bool(r['reached']) for r in ok)} of {len(result['rows'])} walks.",
         "",
     ]
+    if offsets:
+        lines += _robustness_lines(result)
     return "\n".join(lines)
 
 
@@ -328,6 +538,15 @@ def add_courses_parser(bench_sub) -> argparse.ArgumentParser:
     p.add_argument("--scheduler", help="tcp://HOST:PORT of a running Dask scheduler")
     p.add_argument("--workers", type=int, default=None, help="local processes (default: cores)")
     p.add_argument("--resume", action="store_true", help="keep finished jobs of courses.jsonl")
+    p.add_argument(
+        "--start-offsets",
+        default=None,
+        metavar="D1,D2",
+        help="comma-separated distances [m] (e.g. 1e-6,1e-3): each walk also from the start "
+        "moved by each in +x, -x, +y, -y (1 + 4 x N walks per course and planner), a "
+        "start-offset column and a robustness summary per planner (issue 65); default: "
+        "the start alone",
+    )
     p.set_defaults(func=cmd_courses)
     return p
 
@@ -351,6 +570,7 @@ def cmd_courses(args) -> int:
         raise InputError(f"--planners: unknown '{bad[0]}'; use {', '.join(PLANNER_NAMES)}")
     if not args.time_budget > 0:
         raise InputError(f"--time-budget: must be > 0 s, got {args.time_budget}")
+    start_offsets = () if args.start_offsets is None else parse_start_offsets(args.start_offsets)
     from planner.core.interrupts import Interrupts
 
     # Ctrl-C / SIGTERM: the workers stopped, finished jobs kept (as ``stratawalk batch``)
@@ -364,6 +584,7 @@ def cmd_courses(args) -> int:
             scheduler=args.scheduler,
             workers=args.workers,
             resume=args.resume,
+            start_offsets=start_offsets,
         )
     print(render_markdown(result))
     print(f"wrote {Path(args.out) / 'courses.md'} and courses.json, courses.jsonl", file=sys.stderr)
