@@ -736,7 +736,8 @@ def _not_a_terrain(word: str) -> bool:
 
 
 BENCH_OPTIONS = ["--n", "--seed", "--terrains", "--courses", "--planners", "--workers",
-                 "--modes", "--repeats", "--robots", "--time-budget", "--resume"]  # fmt: skip
+                 "--modes", "--repeats", "--robots", "--time-budget", "--resume",
+                 "--start-offsets"]  # fmt: skip
 
 
 @_settings(15)
