@@ -13,17 +13,17 @@ from planner.cli.main import main
 ROOT = Path(__file__).resolve().parents[1]
 DETERMINISTIC = ("status", "reached", "validated", "steps", "distance_to_goal_m", "message")
 
-# tiny walks (25 cm on flat) and one job that fails (unknown robot)
+# tiny walks (15 cm on flat, a few steps each) and one job that fails (unknown robot)
 TINY = """\
 defaults:
   terrain: flat
   start: [0.2, 0.0]
-  goal: [0.45, 0.0]
+  goal: [0.35, 0.0]
   time_budget_s: 30
 jobs:
   - {planner: soft}
   - {planner: recursive}
-  - {planner: soft, goal: [0.4, 0.05]}
+  - {planner: soft, goal: [0.33, 0.04]}
   - {robot: no_such_robot}
 """
 

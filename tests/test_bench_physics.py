@@ -264,13 +264,13 @@ def test_cli_bad_options_are_one_line_errors(args, option, tmp_path, capsys):
 
 
 def test_tiny_end_to_end_run(tmp_path):
-    """Plan 0.5 m on flat, open loop at the plan's speed, in one worker process."""
+    """Plan 0.25 m on flat, open loop at the plan's speed, in one worker process."""
     result = run_physics_bench(
         courses=("flat",),
         generated=0,
         modes=("open",),
         time_budget_s=30.0,
-        named_goal_xy=(0.7, 0.0),
+        named_goal_xy=(0.45, 0.0),
         out_dir=tmp_path,
         workers=1,
         progress=False,

@@ -116,10 +116,11 @@ def test_newton_ik_near_matches_paden_kahan(littledog, rng):
     assert far.method == "paden-kahan"
 
 
-def test_ik_reproduces_10000_targets(littledog, rng):
-    """Paden-Kahan 3 then 2 reproduces FK targets of in-limit joints to 1e-9 m."""
+def test_ik_reproduces_4000_targets(littledog, rng):
+    """Paden-Kahan 3 then 2 reproduces FK targets of in-limit joints to 1e-9 m (1000
+    random in-limit poses: 1000 targets per leg over its whole joint box)."""
     robot, kin = littledog, kinematics_of(littledog)
-    joints = _random_joints(robot, rng, 2500).reshape(-1, 4, 3)
+    joints = _random_joints(robot, rng, 1000).reshape(-1, 4, 3)
     worst, flipped = 0.0, 0
     for sample in joints:
         for i in range(4):
@@ -179,7 +180,9 @@ def test_numeric_ik_fallback_for_offset_hips(tmp_path, rng):
     robot = load_robot(_offset_hip_urdf(tmp_path))
     kin = kinematics_of(robot)
     assert robot.legs[0].points_B[1][2] == pytest.approx(-0.01)
-    for sample in _random_joints(robot, rng, 100).reshape(-1, 4, 3):
+    # 25 random in-limit poses: 100 targets, 25 per leg, each solved to 1e-9 m (a solve is
+    # about 60 ms: the solver, not the sample count, is what this test is about)
+    for sample in _random_joints(robot, rng, 25).reshape(-1, 4, 3):
         for i in range(4):
             target = kin.foot_B(i, sample[i])
             res = kin.ik_leg(i, target)

@@ -301,7 +301,7 @@ def test_terrain_command_describes_and_draws_a_mesh(tmp_path, capsys):
 @pytest.fixture(scope="module")
 def plans(tmp_path_factory):
     """The step course planned as a mesh (5 mm grid) and as terrains/step5cm.yaml, to
-    x = 1.5 m: every foot crosses the step."""
+    x = 1.2 m: every foot crosses the step (at 0.8 m)."""
     folder = tmp_path_factory.mktemp("mesh_plan")
     _write(_step_course(), folder / "course.stl")
     spec = {"name": "course", "kind": "mesh", "file": "course.stl", "resolution": 0.005}
@@ -309,7 +309,7 @@ def plans(tmp_path_factory):
     out = {}
     for key, terrain in (("mesh", str(course)), ("yaml", "step5cm")):
         plan, report = plan_walk(
-            "littledog", terrain, (1.5, 0.0), (0.2, 0.0), "soft", LocalSettings()
+            "littledog", terrain, (1.2, 0.0), (0.2, 0.0), "soft", LocalSettings()
         )
         out[key] = (plan.save(folder / f"{key}.json"), plan, report)
     return folder, out
@@ -332,6 +332,8 @@ def test_mesh_course_plans_to_the_goal_and_checks(plans):
     path, plan, report = out["mesh"]
     assert report.ok, report.summary()
     assert plan.outcome["reached_goal"], plan.outcome
+    feet = np.array(plan.keyframes[-1].feet)  # every foot on the step's top
+    assert np.all(feet[:, 0] > STEP_X) and np.allclose(feet[:, 2], STEP_H, atol=1e-3), feet
     assert plan.terrain["kind"] == "mesh" and len(plan.terrain["heights"]) == 241
     # the plan file is self-contained: checked elsewhere, its terrain needs no mesh
     shutil.move(folder / "course.stl", folder / "moved.stl")
@@ -357,13 +359,16 @@ def test_mesh_plan_has_the_steps_of_the_yaml_course(plans):
     n_mesh, n_ref = (sum(len(f[leg]) - 1 for leg in range(4)) for f in (fm, fr))
     assert abs(n_mesh - n_ref) <= 2, (n_mesh, n_ref)
     worst = worst_flat = 0.0
+    n_flat = 0
     for leg in range(4):
         for p in fm[leg]:  # each mesh foothold has a YAML foothold of the same leg nearby
             d = float(np.min(np.linalg.norm(fr[leg] - p, axis=1)))
             worst = max(worst, d)
             if p[0] < STEP_X - 0.2:
                 worst_flat = max(worst_flat, d)
+                n_flat += 1
     assert worst < 0.015 and worst_flat < 0.005, (worst, worst_flat)
+    assert n_flat >= 4, n_flat  # the flat part was compared too
     print(f"mesh {n_mesh} steps, yaml {n_ref}; footholds differ by at most {1000 * worst:.1f} mm")
 
 

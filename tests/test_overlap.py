@@ -17,11 +17,11 @@ from planner.sim.simulate import run_open_loop
 
 @pytest.fixture(scope="module")
 def flat_pair():
-    """The same 0.6 m walk on flat ground without and with the overlap."""
+    """The same 0.4 m walk on flat ground without and with the overlap."""
     out = {}
     for share in (0.0, 1.0):
         plan, report = plan_walk(
-            "littledog", "flat", (0.8, 0.0), (0.2, 0.0), "soft", LocalSettings(swing_overlap=share)
+            "littledog", "flat", (0.6, 0.0), (0.2, 0.0), "soft", LocalSettings(swing_overlap=share)
         )
         assert plan.outcome["reached_goal"] and report.ok, report.summary()
         out[share] = (plan, report)

@@ -107,7 +107,7 @@ def test_another_robot_walks_with_feedback_and_arrives_over_the_goal():
     from planner.world.terrain import Terrain
 
     flat = Terrain.from_spec({"name": "flat", "kind": "flat", "friction": 0.7, "length": 2.0})
-    plan, report = plan_walk("a1", flat, (0.6, 0.0), (0.0, 0.0))
+    plan, report = plan_walk("a1", flat, (0.6, 0.0), (0.25, 0.0))
     assert plan.outcome["reached_goal"] and report.ok, plan.outcome["message"]
     res = simulate_plan(plan, "feedback")
     m = res.metrics

@@ -585,7 +585,8 @@ def test_feedback_replans_again_once_the_plans_steps_were_left(short_plan, monke
 def test_a_replan_is_followed_only_when_it_reaches_the_goal(short_plan, monkeypatch):
     """replan_rest plans from a given state to the goal; where the soft planner stops short
     the recursive one is asked; a re-plan that stops short (its own dead end) is not
-    returned, so feedback does not walk into it."""
+    returned, so feedback does not walk into it. From the plan's state after its fourth
+    step, as feedback re-plans mid-walk: the rest of the walk, some six steps."""
     from planner.motion.trajectory import Trajectory
     from planner.planning.local import LocalPlanner
     from planner.planning.soft import SoftPlanner
@@ -593,7 +594,9 @@ def test_a_replan_is_followed_only_when_it_reaches_the_goal(short_plan, monkeypa
 
     robot, terrain = short_plan.load_robot(), short_plan.load_terrain()
     st = _planned_settings(short_plan)
-    start = short_plan.keyframe_states()[0]
+    kfs = short_plan.keyframes
+    landed = [k for k in range(1, len(kfs)) if kfs[k].stratum == 0 and kfs[k - 1].stratum != 0]
+    start = short_plan.keyframe_states()[landed[3]]
     goal = short_plan.goal[:2]
     tau = Trajectory.straight(short_plan.start[:2], goal, terrain, 0.15)
     new = replan_rest(robot, terrain, short_plan.friction, st, start, goal, tau)
