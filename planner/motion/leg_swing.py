@@ -41,7 +41,7 @@ from planner.body.robot_scale import length_scale
 from planner.body.state import State
 from planner.motion.interpolate import smootherstep
 
-__all__ = ["joint_space_swing"]
+__all__ = ["joint_space_swing", "can_lift"]
 
 _Array = NDArray[np.float64]
 GRID = 20  # values of hip pitch and knee on the grid
@@ -122,6 +122,16 @@ def _pre_pose(free: _Free, state: State, leg: int) -> _Array | None:
         if ik.reachable and not ik.knee_flipped and free(ik.joints_rad[None])[0]:
             return ik.joints_rad
     return None
+
+
+def can_lift(robot, terrain, state: State, leg: int) -> bool:
+    """Whether ``leg`` has a free pre-pose over its contact in ``state`` (:func:`_pre_pose`).
+
+    The first and last poses of every joint-space swing: a leg that cannot lift its foot
+    a few millimetres up the terrain normal with its links clear (a knee forward against
+    a riser) has no swing from there, nor one that lands there.
+    """
+    return _pre_pose(_Free(robot, terrain, state, leg), state, leg) is not None
 
 
 def _shortcut(free: _Free, way: list[_Array]) -> list[_Array]:

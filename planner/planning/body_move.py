@@ -45,16 +45,20 @@ class BodyMoves:
         swing_target_W=None,
         shrink: float | None = None,
         hint: State | None = None,
+        com_target_W=None,
     ):
         """Theta2 onto the three legs other than ``leg``; returns (solution, samples).
 
         With ``swing_target_W`` the body also keeps ``leg``'s hip within reach of its next
         foothold (Theta2's swing-ready constraint). ``hint``: Theta2's last starting pose
         (:meth:`planner.problems.theta2.Theta2.solve`). (The hint is not aimed at when the
-        optimum's path fails: a feedback run then stalled.)
+        optimum's path fails: a feedback run then stalled.) ``com_target_W``: r_c* instead
+        of Lambda_c's (a contact-sequence certificate's COM).
         """
         support = tuple(i for i in range(4) if i != leg)
         rc = self.body_target(state, leg, shrink, swing_target_W, tau)
+        if com_target_W is not None:
+            rc = np.asarray(com_target_W, float).reshape(3)
         u_f, u_n = self.body_directions(tau, state, rc, leg, swing_target_W)
         landing = swing_target_W is not None
         if self._holds_here(state, leg):
@@ -78,7 +82,9 @@ class BodyMoves:
             return sol, []
         return self._ended(sol, path, support), path
 
-    def _body_move_once(self, state: State, leg: int, tau: Trajectory, target, shrink, hint):
+    def _body_move_once(
+        self, state: State, leg: int, tau: Trajectory, target, shrink, hint, com_target=None
+    ):
         """:meth:`body_move`, remembering its failures for this run.
 
         A body move is a deterministic function of its inputs (Theta2 starts from the
@@ -92,13 +98,22 @@ class BodyMoves:
             arrays.append(np.asarray(target, float))
         if hint is not None:
             arrays += [hint.base_position_W, hint.base_quaternion_xyzw, hint.joints_rad]
-        key = (leg, target is None, hint is None, shrink, self._sink, id(tau)) + tuple(
-            np.ascontiguousarray(a, float).tobytes() for a in arrays
-        )
+        if com_target is not None:
+            arrays.append(np.asarray(com_target, float))
+        key = (
+            leg,
+            target is None,
+            hint is None,
+            com_target is None,
+            shrink,
+            self._sink,
+            id(tau),
+        ) + tuple(np.ascontiguousarray(a, float).tobytes() for a in arrays)
         failed = self._failed_moves.get(key)
         if failed is not None:
             return failed, []
-        sol, path = self.body_move(state, leg, tau, target, shrink, hint)
+        more = {} if com_target is None else {"com_target_W": com_target}
+        sol, path = self.body_move(state, leg, tau, target, shrink, hint, **more)
         if not sol.feasible:
             if len(self._failed_moves) >= FAILED_MOVES_KEPT:
                 self._failed_moves.clear()

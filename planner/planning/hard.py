@@ -229,14 +229,15 @@ class HardPlanner(SoftPlanner):
         return (last, None) if lam is None else (found, lam)
 
     def body_move(self, state: State, leg: int, tau: Trajectory, swing_target_W=None,
-                  shrink: float | None = None, hint: State | None = None):  # fmt: skip
+                  shrink: float | None = None, hint: State | None = None,
+                  com_target_W=None):  # fmt: skip
         """Omega_1's body move onto the three legs other than ``leg``: (solution, samples).
 
         Replaces the soft planner's Theta2 in :meth:`LocalPlanner.step`, so a step of 8.1
         has the soft planner's footholds (Lambda_t's, then the others of the leg's safe
         region), its back-off (body targets lowered where a leg is stretched) and the
         paper's plain pose (no swing-ready constraint) when the foothold's fails.
-        ``shrink`` and ``hint`` (Lambda_c's and Theta2's) do not apply.
+        ``shrink``, ``hint`` and ``com_target_W`` (Lambda_c's and Theta2's) do not apply.
         """
         found, lam = self.search_body(
             state, leg, tau, self.stride_at(state, leg, tau), swing_target_W

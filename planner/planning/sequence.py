@@ -31,16 +31,21 @@ class ContactSequence:
 
     def searched_foothold(
         self, state: State, leg: int, tau: Trajectory, step_m: float, proposal_W
-    ) -> np.ndarray | None:
-        """The first foothold of a certified sequence from ``state``, or None.
+    ) -> tuple[np.ndarray, np.ndarray] | None:
+        """(foothold, COM) of the first step of a certified sequence from ``state``, or None.
 
         ``proposal_W`` (Lambda_t's) is tried first and kept when every later step of the
-        cycle still has a certified foothold; None: the search is off or found nothing.
+        cycle still has a certified foothold; the COM is where the step's certificate holds
+        the body (a body-move target the step may fall back on). None: the search is off
+        or found nothing.
         """
         if self.settings.footholds != "search":
             return None
         steps = self._search_cycle(state, leg, tau, step_m, proposal_W, only_first=False)
-        return np.array(steps[0][1]) if steps else None
+        if not steps:
+            return None
+        _, foothold, cert = steps[0]
+        return np.array(foothold), np.array(cert.com_W)
 
     def certified_first(self, state: State, leg: int, tau: Trajectory, step_m: float, footholds):
         """``footholds`` (the other footholds a step tries, 8.2.2), certified ones first.
@@ -81,6 +86,14 @@ class ContactSequence:
         search = getattr(self, "_contact_searcher", None)
         if search is not None:
             search.mark_failed(np.asarray(state.feet_W, float), leg, np.asarray(foothold_W))
+            self.extra_stats["contact_search"] = dict(search.stats)
+
+    def mark_realised(self) -> None:
+        """The Theta problems made the searched step: counted in the search's stats."""
+        search = getattr(self, "_contact_searcher", None)
+        if search is not None:
+            search.mark_realised()
+            self.extra_stats["contact_search"] = dict(search.stats)
 
     def _contact_search(self, tau: Trajectory) -> ContactSearch:
         search = getattr(self, "_contact_searcher", None)

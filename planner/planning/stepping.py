@@ -92,13 +92,15 @@ class Stepping:
         knee: int | None = None,
     ) -> Step:
         """One attempt of :meth:`step` at the body height in force."""
-        searched = None
+        searched = searched_com = None
         if target_W is not None:
             target = np.asarray(target_W, float).reshape(3)
         else:
             target, _ = self.foothold_target(state, leg, tau, step_m, shrink)
-            searched = self.searched_foothold(state, leg, tau, step_m, target)
-            target = target if searched is None else searched
+            found = self.searched_foothold(state, leg, tau, step_m, target)
+            if found is not None:
+                target = searched = found[0]
+                searched_com = found[1]
         order = [target]  # the footholds to try, in order
         extended = False  # the other footholds are in ``order``
         if try_others and self.leaves_no_support(state, leg, target):
@@ -117,42 +119,27 @@ class Stepping:
         while k < len(order):
             target = order[k]
             hint = body_hint if k == 0 else None
-            sol2, body_path = self._body_move_once(state, leg, tau, target, shrink, hint)
-            if k == 0 and not sol2.feasible:
-                # the paper's plain Theta2 (no swing-ready pose) for the first foothold
-                sol2, body_path = self._body_move_once(state, leg, tau, None, shrink, hint)
-            if not sol2.feasible:
-                step = Step(leg, False, state, None, None, [], [], "body_move", sol2.diagnosis)
-                step.failure = sol2.failure
-            else:
-                sol3, swing_path = self.swing(
-                    sol2.state, leg, tau, step_m, target, knee if k == 0 else None
-                )
-                if sol3.feasible and self.foothold_passage and self.blocks_passage(sol3.state, leg):
-                    # a landing the body cannot pass over fails like one out of reach
-                    sol3.feasible = False
-                    sol3.diagnosis = (
-                        f"swing of {LEG_NAMES[leg]}: standing there, its links would meet "
-                        "the edge ahead as the body passes over the foot"
-                    )
-                if sol3.feasible:
-                    made = Step(leg, True, state, sol2.state, sol3.state, body_path, swing_path)
-                    if (
-                        not try_others
-                        or not self.foothold_lookahead
-                        or self.next_leg_can_move(sol3.state, leg, tau, shrink)
-                    ):
-                        return made
-                    dead_end = dead_end or made
-                    step = Step(
-                        leg, False, state, sol2.state, None, body_path, [], "foot_placement",
-                        "the foothold leaves the next leg no body move",
-                    )  # fmt: skip
-                else:
-                    step = Step(
-                        leg, False, state, sol2.state, None, body_path, [], "foot_placement",
-                        sol3.diagnosis,
-                    )  # fmt: skip
+            step = self._placed(state, leg, tau, step_m, shrink, target, hint,
+                                knee if k == 0 else None, plain=k == 0)  # fmt: skip
+            if not step.ok and k == 0 and searched_com is not None and target is searched:
+                # the searched foothold from its certificate's body pose (the COM target)
+                aimed = self._placed(state, leg, tau, step_m, shrink, target, hint, knee,
+                                     plain=False, aim=searched_com)  # fmt: skip
+                step = aimed if aimed.ok else step
+            if step.ok:
+                if k == 0 and searched is not None:
+                    self.mark_realised()
+                if (
+                    not try_others
+                    or not self.foothold_lookahead
+                    or self.next_leg_can_move(step.end, leg, tau, shrink)
+                ):
+                    return step
+                dead_end = dead_end or step
+                step = Step(
+                    leg, False, state, step.moved, None, step.body_path, [], "foot_placement",
+                    "the foothold leaves the next leg no body move",
+                )  # fmt: skip
             first = first or step
             if k == 0 and searched is not None:  # the search repairs from here next time
                 self.mark_unrealised(state, leg, searched)
@@ -166,6 +153,34 @@ class Stepping:
                 extended = True
             k += 1
         return dead_end or first
+
+    def _placed(self, state, leg, tau, step_m, shrink, target, hint, knee, plain, aim=None):
+        """The body move and the swing to ``target``: the step made, or why not.
+
+        The body move is swing-ready for ``target`` (with ``plain`` the paper's plain
+        Theta2 where that fails; ``aim``: its COM target instead of Lambda_c's).
+        """
+        sol2, body_path = self._body_move_once(state, leg, tau, target, shrink, hint, aim)
+        if plain and not sol2.feasible:
+            # the paper's plain Theta2 (no swing-ready pose) for the first foothold
+            sol2, body_path = self._body_move_once(state, leg, tau, None, shrink, hint)
+        if not sol2.feasible:
+            step = Step(leg, False, state, None, None, [], [], "body_move", sol2.diagnosis)
+            step.failure = sol2.failure
+            return step
+        sol3, swing_path = self.swing(sol2.state, leg, tau, step_m, target, knee)
+        if sol3.feasible and self.foothold_passage and self.blocks_passage(sol3.state, leg):
+            # a landing the body cannot pass over fails like one out of reach
+            sol3.feasible = False
+            sol3.diagnosis = (
+                f"swing of {LEG_NAMES[leg]}: standing there, its links would meet "
+                "the edge ahead as the body passes over the foot"
+            )
+        if sol3.feasible:
+            return Step(leg, True, state, sol2.state, sol3.state, body_path, swing_path)
+        return Step(
+            leg, False, state, sol2.state, None, body_path, [], "foot_placement", sol3.diagnosis
+        )
 
     def next_leg_can_move(self, state: State, leg: int, tau: Trajectory, shrink=None) -> bool:
         """Whether the gait's next leg finds a body move (plain Theta2) after ``leg``'s step.
