@@ -38,12 +38,32 @@ def short_flat_walk(tmp_path_factory):
     return path, plan, plan_series(plan)
 
 
-# test files whose module fixtures plan long walks (500 s and 230 s on this 2-core
-# machine): started first, so that with pytest-xdist (make test: a file per worker at a
-# time, in this order: --no-loadscope-reorder) the other files share the other worker
-# meanwhile instead of waiting behind them
-LONG_FILES = ("test_climb.py", "test_dead_ends.py")
+# the longest test files, longest first (on this 2-core machine in make test, beside other
+# jobs: the soft and recursive climbs of the 10 cm step 240 s and 120 s, test_local 160 s,
+# test_replay 150 s with its 4 m walk, the global planner 110 s, the rest 30-70 s): with
+# pytest-xdist (make test: a file per worker at a time, in this order:
+# --no-loadscope-reorder; a worker takes the next file once two of its tests are left) the
+# long files start first and the many short ones fill in around them, instead of a long
+# file starting last on a worker
+LONG_FILES = (
+    "test_dead_ends.py",
+    "test_climb.py",
+    "test_local.py",
+    "test_replay.py",
+    "test_global_plan.py",
+    "test_simulate.py",
+    "test_mesh_terrain.py",
+    "test_bench_speed.py",
+    "test_overlap.py",
+    "test_fuzz.py",
+    "test_batch.py",
+    "test_two_beat.py",
+    "test_notebooks.py",
+    "test_guide_path.py",
+)
 
 
 def pytest_collection_modifyitems(config, items):
-    items.sort(key=lambda item: item.path.name not in LONG_FILES)  # stable: else as collected
+    order = {name: k for k, name in enumerate(LONG_FILES)}
+    # stable: the long files in the order above, the rest as collected
+    items.sort(key=lambda item: order.get(item.path.name, len(LONG_FILES)))
