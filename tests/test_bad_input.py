@@ -637,3 +637,12 @@ def test_terrain_yaml_reads_numbers_without_a_signed_exponent(tmp_path, capsys):
 def test_robot_given_a_folder_says_so(capsys):
     assert main(["robot", str(LITTLEDOG_URDF.parent)]) == 2
     _one_line_error(capsys, "is a folder", "littledog.urdf")
+
+
+@pytest.mark.parametrize("command", [["bench", "courses"], ["bench", "physics"]])
+def test_bench_workers_below_one_are_refused_in_one_line(command, tmp_path, capsys):
+    """``--workers 0`` names the option, before any job starts."""
+    args = [*command, "--workers", "0", "--out", str(tmp_path / "b")]
+    assert main(args) == 2
+    err = _one_line_error(capsys, "--workers")
+    assert ">= 1" in err, err

@@ -570,6 +570,8 @@ def cmd_courses(args) -> int:
         raise InputError(f"--planners: unknown '{bad[0]}'; use {', '.join(PLANNER_NAMES)}")
     if not args.time_budget > 0:
         raise InputError(f"--time-budget: must be > 0 s, got {args.time_budget}")
+    if args.workers is not None and args.workers < 1:
+        raise InputError(f"--workers: must be >= 1, got {args.workers}")
     start_offsets = () if args.start_offsets is None else parse_start_offsets(args.start_offsets)
     from planner.core.interrupts import Interrupts
 
