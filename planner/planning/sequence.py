@@ -3,10 +3,12 @@
 With ``settings.footholds`` "search" a step's first foothold comes from the contact-sequence
 search (:class:`planner.motion.contact_search.ContactSearch`): Lambda_t's (eq. 13) where
 every later step of the gait cycle still has a certified foothold after it, else the
-first of a certified sequence. The search runs at every step, from the stance the walk is
-in; a step the Theta problems cannot realise is remembered
-(:meth:`~planner.motion.contact_search.ContactSearch.mark_failed`) and the next search
-repairs from there.
+first of a certified sequence (the one found at the step before, where the walk followed
+it). The search runs at every step, from the stance the walk is in. The step's body move
+aims for Lambda_c's target and, where that step fails, for its certificate's COM
+(:meth:`planner.planning.stepping.Stepping.step`); a step the Theta problems cannot realise
+is remembered (:meth:`~planner.motion.contact_search.ContactSearch.mark_failed`) and the
+next search repairs from there.
 
 :class:`ContactSequence` is a part of :class:`planner.planning.local.LocalPlanner`; it uses
 the planner's ``robot``, ``terrain``, ``mu``, ``settings``, ``extra_stats``,

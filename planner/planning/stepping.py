@@ -65,6 +65,9 @@ class Stepping:
         foothold is tried. ``body_hint``: a body pose near the one expected for the first
         foothold (the precomputed plan's, feedback 8.3), Theta2's last starting point.
         ``knee``: the knee branch the leg lands on (the precomputed plan's, :meth:`swing`).
+        With the contact-sequence search (``footholds`` "search") the first foothold is the
+        search's, and where it fails from Lambda_c's body target it is tried once more
+        with its certificate's COM as the target (:mod:`planner.planning.sequence`).
         """
         args = (state, leg, tau, step_m, shrink, target_W, try_others, body_hint, knee)
         first = self._step_once(*args)
