@@ -386,7 +386,13 @@ class LegKinematics:
         )
 
     def ik_leg_near(
-        self, leg: int, target_B, joints_rad, tol_m: float = 1e-10, max_step_rad: float = 0.2
+        self,
+        leg: int,
+        target_B,
+        joints_rad,
+        tol_m: float = 1e-10,
+        max_step_rad: float = 0.2,
+        closest: bool = True,
     ) -> IKResult:
         """IK for a target a few millimetres from the foot at ``joints_rad``: Newton steps.
 
@@ -394,7 +400,7 @@ class LegKinematics:
         per walk; Newton from the nearby solution stays on its branch and costs a few FK
         evaluations. Falls back to :meth:`ik_leg` (Paden-Kahan, reference ``joints_rad``)
         when Newton leaves the joint limits, moves more than ``max_step_rad`` or does not
-        converge in 6 steps.
+        converge in 6 steps (``closest``: as :meth:`ik_leg`'s, for an unreachable target).
         """
         consts, lower, upper = self._newton_consts[leg]
         th0 = [float(v) for v in joints_rad]
@@ -422,7 +428,7 @@ class LegKinematics:
             return IKResult(joints_rad=np.array(th), reachable=True, error_m=err_m, method="newton")
         th0 = np.array(th0)
         target = np.asarray(target_B, dtype=float)
-        return self.ik_leg(leg, target, th0, knee=self.knee_direction(leg, th0))
+        return self.ik_leg(leg, target, th0, knee=self.knee_direction(leg, th0), closest=closest)
 
     def _reference(self, leg: int, reference_rad) -> np.ndarray:
         if reference_rad is not None:

@@ -315,7 +315,12 @@ def leg_joints(
     joints = np.zeros((5, 3))
     for k, c in enumerate(targets):
         j = leg if k == 4 else k
-        ik = kin.ik_leg(j, R.T @ (c - b), closest=False)
+        target_B = R.T @ (c - b)
+        # Newton from theta_nor (a few FK evaluations), else Paden-Kahan on both branches
+        ik = kin.ik_leg_near(j, target_B, robot.theta_nor[j], max_step_rad=math.inf,
+                             closest=False)  # fmt: skip
+        if not ik.reachable or kin.knee_direction(j, ik.joints_rad) != robot.legs[j].knee_direction:
+            ik = kin.ik_leg(j, target_B, closest=False)
         if not ik.reachable:
             which = "its new foothold" if k == 4 else "its foot"
             return f"{robot.legs[j].name} cannot reach {which} (joint limits)"
