@@ -379,9 +379,9 @@ def test_a_failed_body_move_is_not_solved_again(littledog):
     calls = []
     real = planner.body_move
 
-    def blocked(state, leg, tau, target=None, shrink=None, hint=None):
+    def blocked(state, leg, tau, target=None, shrink=None, hint=None, com=None):
         calls.append(target)
-        sol, _ = real(state, leg, tau, target, shrink, hint)
+        sol, _ = real(state, leg, tau, target, shrink, hint, com)
         sol.feasible, sol.diagnosis = False, "blocked"
         return sol, []
 
@@ -443,9 +443,9 @@ def test_a_foothold_that_leaves_the_next_leg_no_stance_is_tried_last(flat_planne
     tried = []
     real = planner.body_move
 
-    def body_move(state, leg, tau, swing_target_W=None, shrink=None, hint=None):
+    def body_move(state, leg, tau, swing_target_W=None, shrink=None, hint=None, com=None):
         tried.append(None if swing_target_W is None else np.array(swing_target_W))
-        return real(state, leg, tau, swing_target_W, shrink, hint)
+        return real(state, leg, tau, swing_target_W, shrink, hint, com)
 
     monkeypatch.setattr(planner, "body_move", body_move)
     step = planner.step(start, 0, tau, planner.stride_m())

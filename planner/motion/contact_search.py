@@ -193,7 +193,7 @@ def certify_step(
     new = np.asarray(foothold_W, float).reshape(3)
     R = np.asarray(rotation_W, float)
     body = _BodyProgram(robot, feet, leg, new, R, z_floor_m, settings)
-    hips_B, com_B = robot_cached(robot, "_search_consts", _search_consts)
+    _, com_B = robot_cached(robot, "_search_consts", _search_consts)
     x = body.solve([R @ com_B])
     if x is None:
         return Certificate(False, -math.inf, None, "no body position")
@@ -363,8 +363,8 @@ def leg_check(
         return ""
     links = leg_links(robot)
     quat = quat_from_rotation(R)
-    for th in poses:
-        margin = links.path_margin(terrain, robot.q_from(b, quat, th))
+    qs = [robot.q_from(b, quat, th) for th in poses]  # lift-off, touch-down
+    for margin in links.path_margins(terrain, qs, [(), ()])[0]:  # one terrain query
         if np.any(margin < 0.0):
             return f"{links.describe(int(np.argmin(margin)))} inside its margin from the terrain"
     name = robot.legs[leg].name
@@ -378,9 +378,9 @@ def leg_check(
         return ""
     check = robot_cached(robot, "_search_torques", TorqueCheck)
     stay_legs = [j for j in range(4) if j != leg]
-    for th, contacts in ((poses[0], feet), (poses[1], after)):
+    for q, contacts in zip(qs, (feet, after), strict=True):
         normals = np.asarray(terrain.normal(contacts), float).reshape(4, 3)
-        res = check.solve(robot.q_from(b, quat, th), stay_legs, mu, normals, least_squares=True)
+        res = check.solve(q, stay_legs, mu, normals, least_squares=True)
         if not res.ratio <= COMMANDED_TORQUE_FRACTION:
             return f"a support joint would need {res.ratio:.0%} of its effort"
     return ""

@@ -56,8 +56,9 @@ class BodyMoves:
         of Lambda_c's (a contact-sequence certificate's COM).
         """
         support = tuple(i for i in range(4) if i != leg)
-        rc = self.body_target(state, leg, shrink, swing_target_W, tau)
-        if com_target_W is not None:
+        if com_target_W is None:
+            rc = self.body_target(state, leg, shrink, swing_target_W, tau)
+        else:
             rc = np.asarray(com_target_W, float).reshape(3)
         u_f, u_n = self.body_directions(tau, state, rc, leg, swing_target_W)
         landing = swing_target_W is not None
@@ -112,8 +113,7 @@ class BodyMoves:
         failed = self._failed_moves.get(key)
         if failed is not None:
             return failed, []
-        more = {} if com_target is None else {"com_target_W": com_target}
-        sol, path = self.body_move(state, leg, tau, target, shrink, hint, **more)
+        sol, path = self.body_move(state, leg, tau, target, shrink, hint, com_target)
         if not sol.feasible:
             if len(self._failed_moves) >= FAILED_MOVES_KEPT:
                 self._failed_moves.clear()
