@@ -5,7 +5,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 DOCS_STAMP := $(VENV)/.docs-installed
 
-.PHONY: demo test lint bench fuzz clean docs
+.PHONY: demo test test-long lint bench fuzz clean docs
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -20,9 +20,14 @@ demo: $(STAMP)
 # module fixtures (plans) are made once, in collection order (tests/conftest.py puts the
 # files that plan long walks first; xdist's default order, most tests first, started the
 # 10 cm climb last); TEST_WORKERS=0 runs it in one process
+# (the tests marked long, whole courses crossed where shorter tests check the same rules,
+# run in make test-long and make bench: ~4 min on 2 cores)
 TEST_WORKERS ?= auto
 test: $(STAMP)
-	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder -m "not long"
+
+test-long: $(STAMP)
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder -m long
 
 # Theta1-4: IPOPT (exact derivatives) vs SLSQP (finite differences); ~4 min on 2 cores
 # courses: LittleDog x 17 courses (9 named, 8 of issue 15) x soft/recursive, 240 s budget;
@@ -37,6 +42,7 @@ test: $(STAMP)
 #   speed: planning time per course (median of 5), where it goes, flat 1-8 m (~10 min);
 #   robots: every robot of the list on flat, rough and step courses scaled to it (~15 min)
 bench: $(STAMP)
+	$(MAKE) test-long
 	$(VENV)/bin/stratawalk bench theta --jit
 	$(VENV)/bin/stratawalk bench courses
 	$(VENV)/bin/stratawalk bench physics

@@ -38,28 +38,29 @@ def short_flat_walk(tmp_path_factory):
     return path, plan, plan_series(plan)
 
 
-# the longest test files, longest first (on this 2-core machine in make test, beside other
-# jobs: the soft and recursive climbs of the 10 cm step 240 s and 120 s, test_local 160 s,
-# test_replay 150 s with its 4 m walk, the global planner 110 s, the rest 30-70 s): with
-# pytest-xdist (make test: a file per worker at a time, in this order:
+# the longest test files, longest first (make test on this 2-core machine: the recursive
+# climb of the 10 cm step ~60 s, test_replay ~60 s with its 4 m walk, test_fuzz, test_local,
+# test_simulate 50-60 s, the rest 20-45 s; test_dead_ends, 150 s, runs in make test-long):
+# with pytest-xdist (make test: a file per worker at a time, in this order:
 # --no-loadscope-reorder; a worker takes the next file once two of its tests are left) the
 # long files start first and the many short ones fill in around them, instead of a long
 # file starting last on a worker
 LONG_FILES = (
     "test_dead_ends.py",
     "test_climb.py",
-    "test_local.py",
     "test_replay.py",
-    "test_global_plan.py",
+    "test_fuzz.py",
+    "test_local.py",
     "test_simulate.py",
     "test_mesh_terrain.py",
-    "test_bench_speed.py",
-    "test_overlap.py",
-    "test_fuzz.py",
+    "test_bad_input.py",
     "test_batch.py",
-    "test_two_beat.py",
+    "test_global_plan.py",
     "test_notebooks.py",
+    "test_two_beat.py",
+    "test_bench_speed.py",
     "test_guide_path.py",
+    "test_overlap.py",
 )
 
 

@@ -25,6 +25,11 @@ import pytest
 from planner.planning.local import LocalSettings
 from planner.planning.walk import plan_walk
 
+# 2.5 min on 2 cores: make test-long and make bench. The rule itself (a dead end traced back,
+# planned again with shorter strides; greedy stays in it) is checked on a constructed dead
+# end in tests/test_local.py, in make test
+pytestmark = pytest.mark.long
+
 
 @pytest.fixture(scope="module")
 def step_up():

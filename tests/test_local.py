@@ -147,6 +147,8 @@ def test_soft_plan_over_a_step_passes_check(littledog):
     assert np.all(feet[:, 0] > 0.42 + 0.02) and np.allclose(feet[:, 2], 0.04, atol=1e-3)
 
 
+@pytest.mark.long  # 85 s: make test-long; its parts in make test (tests/test_leg_swing.py's
+# joint-space swings over a barrier and knee flips, the hind foot refused below)
 def test_soft_plan_over_a_barrier_passes_check(littledog):
     """All four legs step over a 7.5 cm barrier (issue 15): other footholds, swings in the
     leg's joint space and a knee branch chosen for the edge, judged by the validator.

@@ -324,6 +324,35 @@ def test_com_margin_is_distance_to_support_triangle_on_flat_ground(
     )
 
 
+@pytest.mark.parametrize("legs", [(0, 1, 2, 3), (0, 1, 3), (1, 2, 3)])
+def test_level_com_region_in_closed_form_is_the_socps(legs, rng, monkeypatch) -> None:
+    """Level contacts: the closed form (the support polygon) against the support-function
+    SOCPs it replaces there, on random stances at one height and random friction."""
+    import planner.body.statics as statics
+
+    for _ in range(5):
+        feet = RECT + np.r_[rng.normal(scale=0.04, size=2), 0.0] * rng.uniform(-1, 1, (4, 3))
+        feet[:, 2] = rng.uniform(-0.2, 0.2)  # one height for all four
+        mu, z = rng.uniform(0.0, 1.5), rng.uniform(0.05, 0.4)
+        closed = feasible_com_region(feet, z, MASS, legs, mu)
+        with monkeypatch.context() as m:
+            m.setattr(statics, "_level", lambda sc: False)
+            socp = feasible_com_region(feet, z, MASS, legs, mu, n_dirs=256)
+        # the same polygon: every vertex of one within 1e-6 m of one of the other (the
+        # SOCPs' solutions repeat a vertex to within the solver's tolerance)
+        d = np.linalg.norm(closed[:, None] - socp[None], axis=-1)
+        assert len(closed) == len(legs) and d.min(axis=0).max() < 1e-6, (closed, socp)
+        assert d.min(axis=1).max() < 1e-6, (closed, socp)
+    # a foot 1 mm higher, or a normal tilted, is not level: the SOCPs there
+    assert statics._level(statics._scaled(feet, MASS, legs, None, GRAVITY_W))
+    raised = feet.copy()
+    raised[legs[0], 2] += 1e-3
+    assert not statics._level(statics._scaled(raised, MASS, legs, None, GRAVITY_W))
+    tilted = np.tile([0.0, 0.0, 1.0], (4, 1))
+    tilted[legs[0]] = [0.01, 0.0, 1.0]
+    assert not statics._level(statics._scaled(feet, MASS, legs, tilted, GRAVITY_W))
+
+
 def test_com_region_on_a_slope_shrinks_downhill_with_height() -> None:
     # Gravity tilted in the world frame = flat feet on a slope seen in the slope's frame:
     # the feasible region moves against the gravity tilt by z tan(theta), independent of mu

@@ -76,6 +76,9 @@ COND_MAX: float = 1e8
 """Above this condition number of the scaled eq.-5 system a stance is degenerate."""
 
 N_LEGS = 4
+# contacts within this of one horizontal plane (in RMS support radii), normals and gravity
+# within this of vertical: the feasible COM region in closed form (the support polygon)
+LEVEL_TOL = 1e-9
 _Array = NDArray[np.float64]
 _SOLVED = ("Solved", "AlmostSolved")
 
@@ -805,8 +808,25 @@ def static_feasibility(
     )
 
 
+def _level(sc: _Scaled) -> bool:
+    """Whether the contacts are coplanar and horizontal, their normals and gravity vertical."""
+    vertical = np.array([0.0, 0.0, 1.0])
+    return (
+        float(np.ptp(sc.rho[:, 2])) <= LEVEL_TOL
+        and float(np.max(np.abs(sc.normals - vertical))) <= LEVEL_TOL
+        and float(np.max(np.abs(sc.gamma - vertical))) <= LEVEL_TOL
+    )
+
+
 def _com_region(sc: _Scaled, com_z_m: float, mu: float, n_dirs: int, clip: float = 20.0) -> _Array:
-    """Support-function polygon of the feasible COM xy set (see feasible_com_region)."""
+    """Support-function polygon of the feasible COM xy set (see feasible_com_region).
+
+    Level contacts (:func:`_level`) in closed form: vertical forces suffice and the
+    horizontal ones cancel in the moments about a horizontal axis (they act at one height),
+    so the set is the support polygon, the convex hull of the feet (7.3), for any mu.
+    """
+    if _level(sc):
+        return sc.centroid[:2] + sc.length * convex_hull(sc.rho[:, :2], tol=1e-7)
     k = len(sc.sup)
     nv = 3 * k + 2  # scaled forces, then COM x, y (centroid-relative, units of L)
     rho_cz = (com_z_m - sc.centroid[2]) / sc.length
