@@ -321,6 +321,18 @@ def test_a_knee_flipping_between_two_clear_samples_through_a_wall_fails(flat_pla
     bares = links.path_margins(terrain, ends, [[0], [0]], scales=(0.0,))[0]
     why = planner._between_samples(states, ends, links, bares)
     assert "FL" in why and "between samples 0 and 1" in why, why
+    fl_moves = np.abs(states[1].joints_rad[0] - states[0].joints_rad[0]).max()
+    assert f"its joints move {fl_moves:.2f} rad there" in why, why  # the FL's own motion
+
+
+def test_a_sweep_names_the_motion_of_the_leg_whose_link_it_is():
+    """A link swept through the terrain by a small motion of its own leg while another leg
+    flips: the message says both, not the other's flip as the link's leg's."""
+    from planner.planning.path_checks import _moves
+
+    jumps = np.array([0.06, 0.0, 2.57, 0.0])  # FL a little, HL 2.57 rad
+    assert _moves(jumps, 0) == "its joints move 0.06 rad there, HL's 2.57 rad"
+    assert _moves(jumps, 2) == "its joints move 2.57 rad there"
 
 
 def test_a_swing_foot_swept_through_the_ground_between_two_samples_fails(flat_plan, littledog):

@@ -288,7 +288,7 @@ class PathChecks:
             legs = tuple(int(i) for i in np.flatnonzero(leg_jump > BETWEEN_STEP_RAD))
             m = int(np.ceil(jump / BETWEEN_STEP_RAD))
             inner = [between_q(qs[k], qs[k + 1], u) for u in np.arange(1, m) / m]
-            sweeps.append((k, legs, swing, inner, jump))
+            sweeps.append((k, legs, swing, inner, leg_jump))
         measured: dict[int, np.ndarray] = {}
         for legs in {legs for _, legs, _, _, _ in sweeps}:
             group = [sw for sw in sweeps if sw[1] == legs]
@@ -299,15 +299,15 @@ class PathChecks:
             for sw in group:
                 measured[sw[0]] = out[at : at + len(sw[3])]
                 at += len(sw[3])
-        for k, _, _, _, jump in sweeps:
+        for k, _, _, _, leg_jump in sweeps:
             floor = np.minimum(np.minimum(bares[k], bares[k + 1]), 0.0) - START_SLACK_M
             for bare in measured[k]:
                 c = int(np.argmin(bare - floor))
                 if bare[c] < floor[c]:
                     return Problem(
                         f"the {links.describe(c)} passes {-bare[c] * 1000:.1f} mm through the "
-                        f"terrain between samples {k} and {k + 1} of the path (its joints move "
-                        f"{jump:.2f} rad there)",
+                        f"terrain between samples {k} and {k + 1} of the path ("
+                        f"{_moves(leg_jump, links.capsules[c].leg)})",
                         FailureKind.LINK_SWEEP,
                     )
         return self._feet_between_samples(path, sweeps)
@@ -323,7 +323,7 @@ class PathChecks:
         the open-loop walk fell in MuJoCo (the links passed).
         """
         rho = self.robot.foot_radius_m
-        for k, legs, swing, inner, jump in sweeps:
+        for k, legs, swing, inner, leg_jump in sweeps:
             feet = [i for i in swing if i in legs]
             if not feet or not inner:
                 continue
@@ -340,8 +340,8 @@ class PathChecks:
             if worst[j] > allowed[j]:
                 return Problem(
                     f"the {LEG_NAMES[feet[j]]} foot passes {worst[j] * 1000:.1f} mm through the "
-                    f"terrain between samples {k} and {k + 1} of the path (its joints move "
-                    f"{jump:.2f} rad there)",
+                    f"terrain between samples {k} and {k + 1} of the path ("
+                    f"{_moves(leg_jump, feet[j])})",
                     FailureKind.FOOT_SWEEP,
                 )
         return ""
@@ -369,3 +369,16 @@ def holding_legs(path: list[State], k: int) -> np.ndarray:
     if len(sup) == 4 and k == len(path) - 1 and len(s.support) == 3:
         return np.asarray(s.support)
     return sup
+
+
+def _moves(leg_jump, leg: int) -> str:
+    """What moved between two samples, for a sweep's message.
+
+    ``leg``'s largest joint change, and that of the leg that moved most where it is
+    another one (``leg_jump``: (4,) [rad]).
+    """
+    own = f"its joints move {float(leg_jump[leg]):.2f} rad there"
+    most = int(np.argmax(leg_jump))
+    if most == int(leg):
+        return own
+    return f"{own}, {LEG_NAMES[most]}'s {float(leg_jump[most]):.2f} rad"
