@@ -1,5 +1,7 @@
 """The gait step queue and the soft-persuasion local planner of section 8.2."""
 
+from dataclasses import replace
+
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -17,6 +19,7 @@ from planner.planning.landing import (
     PASSAGE_STRIDES,
 )
 from planner.planning.soft import SoftPlanner
+from planner.planning.step import Step
 from planner.planning.targets import ALWAYS_REACH_FRACTION, OTHER_FOOTHOLDS
 from planner.world.terrain import load_terrain
 
@@ -496,6 +499,45 @@ def test_a_failed_step_is_tried_again_with_the_body_lower(flat_planner, monkeypa
     monkeypatch.setattr(planner, "_step_once", once)
     step = planner.step(start, 2, tau, planner.stride_m())
     assert seen == [False, True] and step.ok and not planner._sink
+
+
+def test_a_failing_step_tries_no_more_footholds_once_the_budget_is_spent(
+    flat_planner, monkeypatch
+):
+    """The time budget holds inside a cycle: past the run's deadline a failing step gives
+    up after its first foothold (no other footholds, no lowered retry); before it, it
+    tries them all. plan_run sets the deadline from the budget and clears it after."""
+    import math
+
+    planner = SoftPlanner(flat_planner.robot, flat_planner.terrain)
+    tau = Trajectory.straight([0.2, 0.0], [1.0, 0.0], planner.terrain, planner.com_height_m())
+    start = planner.initial_state([0.2, 0.0], tau)
+    tried = []
+
+    def placed(state, leg, tau, step_m, shrink, target, *rest, **kwargs):
+        tried.append((planner._sink, np.array(target)))
+        return Step(leg, False, state, None, None, [], [], "foot_placement", "forced failure")
+
+    monkeypatch.setattr(planner, "_placed", placed)
+    assert planner._deadline_s == math.inf
+    step = planner.step(start, 0, tau, planner.stride_m())
+    assert not step.ok and step.diagnosis == "forced failure"
+    plain = [t for sunk, t in tried if not sunk]
+    assert len(plain) > 1 and any(sunk for sunk, _ in tried)  # others, then lowered
+    first = plain[0]
+    tried.clear()
+    planner._deadline_s = -math.inf  # spent
+    step = planner.step(start, 0, tau, planner.stride_m())
+    assert not step.ok and step.diagnosis == "forced failure"
+    assert len(tried) == 1 and not tried[0][0] and np.allclose(tried[0][1], first)
+    # a run sets the deadline from its budget and clears it when it ends
+    seen = []
+    monkeypatch.setattr(planner, "_placed", lambda *a, **k: seen.append(planner._deadline_s)
+                        or placed(*a, **k))  # fmt: skip
+    planner.settings = replace(planner.settings, time_budget_s=1e4, max_fails_in_row=1)
+    planner.plan((0.2, 0.0), (1.0, 0.0))
+    assert seen and all(math.isfinite(d) and d > 0 for d in seen)
+    assert planner._deadline_s == math.inf
 
 
 def test_a_path_from_a_start_out_of_reach_may_only_come_back_into_reach(flat_planner):

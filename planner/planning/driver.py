@@ -20,6 +20,7 @@ its outcome (:class:`LocalPlan`).
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
@@ -495,7 +496,9 @@ def plan_run(planner, start_xy, goal_xy, tau, progress, start_state) -> LocalPla
 
     The walk starts at Theta4's initial placement (7.5) and is chosen by the planner's
     ``_run(walk, run)`` (the driver's cycles, or 8.5's windows); Ctrl-C keeps the walk so
-    far. Its samples are timed inside the planning time, the swing overlaps searched
+    far. The time budget holds inside a cycle too: past it (or after Ctrl-C) a failing step
+    tries no further foothold (:meth:`planner.planning.stepping.Stepping.out_of_time`), so
+    a run ends within one foothold's attempt of its budget. Its samples are timed inside the planning time, the swing overlaps searched
     meanwhile in a worker process where the settings ask for one.
     """
     from planner.motion.trajectory import Trajectory
@@ -512,6 +515,8 @@ def plan_run(planner, start_xy, goal_xy, tau, progress, start_state) -> LocalPla
 
         worker = OverlapWorker.start(planner)
     walk = Walk(planner, state, worker)
+    budget = planner.settings.time_budget_s
+    planner._deadline_s = t_begin + budget if budget is not None else math.inf
     try:
         try:
             message = planner._run(walk, run)
@@ -521,6 +526,7 @@ def plan_run(planner, start_xy, goal_xy, tau, progress, start_state) -> LocalPla
         with interrupts.shielded():  # timed now (the overlaps), inside planning time
             walk.keyframes  # noqa: B018
     finally:
+        planner._deadline_s = math.inf
         if worker is not None:
             worker.close()
             walk.worker = None

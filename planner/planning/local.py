@@ -14,6 +14,8 @@ planned is kept and returned.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from planner.body.kinematics import hip_point_B, kinematics_of
@@ -81,6 +83,7 @@ class LocalPlanner(
         self.settings = timed_settings(settings or LocalSettings(), robot)
         self.kin = kinematics_of(robot)
         self._sink = False  # body targets lowered where a leg is stretched (step's back-off)
+        self._deadline_s = math.inf  # perf_counter() past which a step tries no more footholds
         self._hips_B = np.array([hip_point_B(lg) for lg in robot.legs])
         self._theta2: dict[tuple[tuple[int, ...], bool], Theta2] = {}
         self._theta3: dict[int, Theta3] = {}

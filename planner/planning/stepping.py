@@ -9,7 +9,8 @@ recursive planner's look-ahead) or not to block the body (:mod:`planner.planning
 and a failed step is tried once more with the body lowered where a leg is stretched.
 
 :class:`Stepping` is a part of :class:`planner.planning.local.LocalPlanner`; it uses the
-planner's ``settings``, ``_sink``, ``foothold_lookahead`` and ``foothold_passage``, its
+planner's ``settings``, ``_sink``, ``_deadline_s`` (:func:`planner.planning.driver.plan_run`),
+``foothold_lookahead`` and ``foothold_passage``, its
 Theta2 problems (:meth:`theta2`, :meth:`_count`), the targets
 (:class:`planner.planning.targets.Targets`), the body moves, the swing and the knee
 choice.
@@ -17,11 +18,14 @@ choice.
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from planner.body.robot import LEG_NAMES
 from planner.body.stability import triangle_inradius_m
 from planner.body.state import State
+from planner.core import interrupts
 from planner.core.failures import FailureKind
 from planner.motion.trajectory import Trajectory
 from planner.planning.step import Step
@@ -52,7 +56,8 @@ class Stepping:
         (Theta2's swing-ready constraint); if that is infeasible, the paper's plain Theta2.
         When that foothold fails (no landing-ready body pose, or no swing), up to
         ``OTHER_FOOTHOLDS`` others of the leg's reachable, safe region are tried
-        (:meth:`other_footholds`). A failed placement keeps the body move
+        (:meth:`other_footholds`), while time is left (:meth:`out_of_time`). A failed
+        placement keeps the body move
         (``Step.moved``) of the first attempt: the robot stands safely on three legs there.
         A foothold that would leave the gait's next leg no stance to swing from
         (:meth:`leaves_no_support`) is tried after those around the leg's nominal
@@ -71,7 +76,7 @@ class Stepping:
         """
         args = (state, leg, tau, step_m, shrink, target_W, try_others, body_hint, knee)
         first = self._step_once(*args)
-        if first.ok or not self.settings.follow_support or self._sink:
+        if first.ok or not self.settings.follow_support or self._sink or self.out_of_time():
             return first
         # back off: the same step with the body lowered wherever a leg
         # would be stretched (:meth:`_reach_sink_m`); kept only when it succeeds
@@ -120,6 +125,8 @@ class Stepping:
         dead_end = None  # the first step made that leaves the next leg no body move
         k = 0
         while k < len(order):
+            if k > 0 and self.out_of_time():
+                break  # the run's budget is spent (or Ctrl-C): the first failure stands
             target = order[k]
             hint = body_hint if k == 0 else None
             step = self._placed(state, leg, tau, step_m, shrink, target, hint,
@@ -156,6 +163,15 @@ class Stepping:
                 extended = True
             k += 1
         return dead_end or first
+
+    def out_of_time(self) -> bool:
+        """Whether the run's time budget is spent or Ctrl-C asked it to stop.
+
+        A failing step then tries no other foothold and no lowered body (:meth:`step`):
+        the driver's stop rules (:class:`planner.planning.driver.StopRules`) are checked
+        between cycles, and one failing step may try a dozen footholds for tens of seconds.
+        """
+        return interrupts.requested() or time.perf_counter() > self._deadline_s
 
     def _placed(self, state, leg, tau, step_m, shrink, target, hint, knee, plain, aim=None):
         """The body move and the swing to ``target``: the step made, or why not.
