@@ -501,9 +501,7 @@ def test_a_failed_step_is_tried_again_with_the_body_lower(flat_planner, monkeypa
     assert seen == [False, True] and step.ok and not planner._sink
 
 
-def test_a_failing_step_tries_no_more_footholds_once_the_budget_is_spent(
-    flat_planner, monkeypatch
-):
+def test_a_failing_step_tries_no_more_footholds_once_the_budget_is_spent(flat_planner, monkeypatch):
     """The time budget holds inside a cycle: past the run's deadline a failing step gives
     up after its first foothold (no other footholds, no lowered retry); before it, it
     tries them all. plan_run sets the deadline from the budget and clears it after."""

@@ -498,8 +498,9 @@ def plan_run(planner, start_xy, goal_xy, tau, progress, start_state) -> LocalPla
     ``_run(walk, run)`` (the driver's cycles, or 8.5's windows); Ctrl-C keeps the walk so
     far. The time budget holds inside a cycle too: past it (or after Ctrl-C) a failing step
     tries no further foothold (:meth:`planner.planning.stepping.Stepping.out_of_time`), so
-    a run ends within one foothold's attempt of its budget. Its samples are timed inside the planning time, the swing overlaps searched
-    meanwhile in a worker process where the settings ask for one.
+    a run ends within one foothold's attempt of its budget. Its samples are timed inside
+    the planning time, the swing overlaps searched meanwhile in a worker process where the
+    settings ask for one.
     """
     from planner.motion.trajectory import Trajectory
 
