@@ -10,7 +10,7 @@ from planner.body.kinematics import kinematics_of
 from planner.body.robot import load_robot
 from planner.body.rolling import sliding
 from planner.motion.gait_queue import CRAWL, GaitQueue
-from planner.motion.heuristics import TARGET_REACH_FRACTION, nominal_height_m
+from planner.motion.heuristics import nominal_height_m
 from planner.motion.trajectory import Trajectory
 from planner.planning.landing import (
     KNEE_CHOICE_FOOT_ZONE_M,
@@ -463,48 +463,29 @@ def test_a_foothold_that_leaves_the_next_leg_no_stance_is_tried_last(flat_planne
     assert plain.ok and plain.end.feet_W[0][1] < 0.075
 
 
-def test_a_failed_step_is_tried_again_with_the_body_lower(flat_planner, monkeypatch):
-    """The back-off of LocalPlanner.step: body targets sunk where a leg is stretched."""
+def test_a_body_target_sinks_where_a_leg_would_be_stretched(flat_planner):
+    """Lambda_c's target is lowered until every leg is within ALWAYS_REACH_FRACTION of its
+    reach (Targets.sunk_target), and only where a leg would be stretched."""
     planner = SoftPlanner(flat_planner.robot, flat_planner.terrain)
     tau = Trajectory.straight([0.2, 0.0], [1.0, 0.0], planner.terrain, planner.com_height_m())
     start = planner.initial_state([0.2, 0.0], tau)
     stretched = start.copy()
-    stretched.feet_W[2, 0] -= 0.1  # HL far behind: its hip would be out of reach
-    high = planner.body_target(stretched, 1, tau=tau)
-    planner._sink = True
+    stretched.feet_W[2, 0] -= 0.18  # HL far behind: its hip would pass 0.95 of its reach
+    high = planner.body_target(stretched, 1)  # without tau: not sunk
     low = planner.body_target(stretched, 1, tau=tau)
     assert low[2] < high[2] - 0.005 and np.allclose(low[:2], high[:2])
-    fraction = TARGET_REACH_FRACTION
-    assert planner._reach_sink_m(stretched, 1, low, tau, None, fraction) > -1e-9  # in reach
-    # without backing off the target sinks too, less: within ALWAYS_REACH_FRACTION
     always = ALWAYS_REACH_FRACTION
-    assert always > fraction
-    assert planner._reach_sink_m(stretched, 1, high, tau, None, always) > -1e-9
-    assert planner._reach_sink_m(stretched, 1, high, tau, None, fraction) < -0.005
-    assert planner.body_target(start, 1, tau=tau)[2] == pytest.approx(  # nothing stretched
-        SoftPlanner(planner.robot, planner.terrain).body_target(start, 1, tau=tau)[2]
+    assert planner._reach_sink_m(stretched, 1, low, tau, None, always) > -1e-9  # in reach
+    assert planner._reach_sink_m(stretched, 1, high, tau, None, always) < -0.005
+    assert planner.body_target(start, 1, tau=tau) == pytest.approx(  # nothing stretched
+        planner.body_target(start, 1), abs=1e-9
     )
-    planner._sink = False
-    # a step that fails is attempted once more, sunk, and the sunk attempt kept if it works
-    seen = []
-    real = planner._step_once
-
-    def once(*args):
-        seen.append(planner._sink)
-        out = real(*args)
-        if not planner._sink:
-            out.ok, out.diagnosis = False, "forced failure"
-        return out
-
-    monkeypatch.setattr(planner, "_step_once", once)
-    step = planner.step(start, 2, tau, planner.stride_m())
-    assert seen == [False, True] and step.ok and not planner._sink
 
 
 def test_a_failing_step_tries_no_more_footholds_once_the_budget_is_spent(flat_planner, monkeypatch):
     """The time budget holds inside a cycle: past the run's deadline a failing step gives
-    up after its first foothold (no other footholds, no lowered retry); before it, it
-    tries them all. plan_run sets the deadline from the budget and clears it after."""
+    up after its first foothold; before it, it tries the others too. plan_run sets the
+    deadline from the budget and clears it after."""
     import math
 
     planner = SoftPlanner(flat_planner.robot, flat_planner.terrain)
@@ -513,21 +494,20 @@ def test_a_failing_step_tries_no_more_footholds_once_the_budget_is_spent(flat_pl
     tried = []
 
     def placed(state, leg, tau, step_m, shrink, target, *rest, **kwargs):
-        tried.append((planner._sink, np.array(target)))
+        tried.append(np.array(target))
         return Step(leg, False, state, None, None, [], [], "foot_placement", "forced failure")
 
     monkeypatch.setattr(planner, "_placed", placed)
     assert planner._deadline_s == math.inf
     step = planner.step(start, 0, tau, planner.stride_m())
     assert not step.ok and step.diagnosis == "forced failure"
-    plain = [t for sunk, t in tried if not sunk]
-    assert len(plain) > 1 and any(sunk for sunk, _ in tried)  # others, then lowered
-    first = plain[0]
+    assert len(tried) > 1  # the other footholds
+    first = tried[0]
     tried.clear()
     planner._deadline_s = -math.inf  # spent
     step = planner.step(start, 0, tau, planner.stride_m())
     assert not step.ok and step.diagnosis == "forced failure"
-    assert len(tried) == 1 and not tried[0][0] and np.allclose(tried[0][1], first)
+    assert len(tried) == 1 and np.allclose(tried[0], first)
     # a run sets the deadline from its budget and clears it when it ends
     seen = []
     monkeypatch.setattr(planner, "_placed", lambda *a, **k: seen.append(planner._deadline_s)

@@ -9,7 +9,7 @@ run (:meth:`_body_move_once`).
 
 :class:`BodyMoves` is a part of :class:`planner.planning.local.LocalPlanner`; it uses the
 planner's ``robot``, ``terrain``, ``mu``, ``settings``, ``check``, ``_via_theta1``,
-``_failed_moves`` and ``_sink``, its Theta2 problems (:meth:`theta2`, :meth:`_count`), the
+and ``_failed_moves``, its Theta2 problems (:meth:`theta2`, :meth:`_count`), the
 targets (:class:`planner.planning.targets.Targets`), the path checks
 (:class:`planner.planning.path_checks.PathChecks`) and the level-ground samples
 (:class:`planner.planning.level.LevelGround`).
@@ -107,7 +107,6 @@ class BodyMoves:
             hint is None,
             com_target is None,
             shrink,
-            self._sink,
             id(tau),
         ) + tuple(np.ascontiguousarray(a, float).tobytes() for a in arrays)
         failed = self._failed_moves.get(key)

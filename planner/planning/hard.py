@@ -13,7 +13,7 @@ is cycled; for each leg i_f of S
    body path to its pose passes every sample check too;
 2. i_f is lifted, swung and placed with Theta3 near Lambda_t, as in the soft planner
    (:meth:`LocalPlanner.step` with this planner's :meth:`HardPlanner.body_move`: the
-   same other footholds and back-off as soft).
+   same other footholds as soft).
 
 A failure (no feasible lambda, or no foothold) moves on to the next leg of S: unlike the
 gait step queue of 8.2, a failed leg waits a whole cycle (section 8.2, comment ii). The
@@ -235,8 +235,7 @@ class HardPlanner(SoftPlanner):
 
         Replaces the soft planner's Theta2 in :meth:`LocalPlanner.step`, so a step of 8.1
         has the soft planner's footholds (Lambda_t's, then the others of the leg's safe
-        region), its back-off (body targets lowered where a leg is stretched) and the
-        paper's plain pose (no swing-ready constraint) when the foothold's fails.
+        region) and the paper's plain pose (no swing-ready constraint) when the foothold's fails.
         ``shrink``, ``hint`` and ``com_target_W`` (Lambda_c's and Theta2's) do not apply.
         """
         found, lam = self.search_body(

@@ -82,7 +82,6 @@ class LocalPlanner(
         self.mu = float(terrain.spec.get("friction", 0.7) if mu is None else mu)
         self.settings = timed_settings(settings or LocalSettings(), robot)
         self.kin = kinematics_of(robot)
-        self._sink = False  # body targets lowered where a leg is stretched (step's back-off)
         self._deadline_s = math.inf  # perf_counter() past which a step tries no more footholds
         self._hips_B = np.array([hip_point_B(lg) for lg in robot.legs])
         self._theta2: dict[tuple[tuple[int, ...], bool], Theta2] = {}

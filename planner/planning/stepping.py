@@ -5,11 +5,10 @@ other three legs (swing-ready where it can, :mod:`planner.planning.body_move`), 
 and placement with Theta3 (:mod:`planner.planning.swing`). Beyond the paper, other
 footholds are tried when the first fails, footholds that leave the gait's next leg no
 stance come last, a foothold may be required to leave the next leg a body move (the
-recursive planner's look-ahead) or not to block the body (:mod:`planner.planning.landing`),
-and a failed step is tried once more with the body lowered where a leg is stretched.
+recursive planner's look-ahead) or not to block the body (:mod:`planner.planning.landing`).
 
 :class:`Stepping` is a part of :class:`planner.planning.local.LocalPlanner`; it uses the
-planner's ``settings``, ``_sink``, ``_deadline_s`` (:func:`planner.planning.driver.plan_run`),
+planner's ``settings``, ``_deadline_s`` (:func:`planner.planning.driver.plan_run`),
 ``foothold_lookahead`` and ``foothold_passage``, its
 Theta2 problems (:meth:`theta2`, :meth:`_count`), the targets
 (:class:`planner.planning.targets.Targets`), the body moves, the swing and the knee
@@ -57,8 +56,8 @@ class Stepping:
         When that foothold fails (no landing-ready body pose, or no swing), up to
         ``OTHER_FOOTHOLDS`` others of the leg's reachable, safe region are tried
         (:meth:`other_footholds`), while time is left (:meth:`out_of_time`). A failed
-        placement keeps the body move
-        (``Step.moved``) of the first attempt: the robot stands safely on three legs there.
+        placement keeps the body move (``Step.moved``) of the first attempt: the robot
+        stands safely on three legs there.
         A foothold that would leave the gait's next leg no stance to swing from
         (:meth:`leaves_no_support`) is tried after those around the leg's nominal
         placement that do not. With ``foothold_lookahead`` a foothold after which the next
@@ -74,32 +73,6 @@ class Stepping:
         search's, and where it fails from Lambda_c's body target it is tried once more
         with its certificate's COM as the target (:mod:`planner.planning.sequence`).
         """
-        args = (state, leg, tau, step_m, shrink, target_W, try_others, body_hint, knee)
-        first = self._step_once(*args)
-        if first.ok or not self.settings.follow_support or self._sink or self.out_of_time():
-            return first
-        # back off: the same step with the body lowered wherever a leg
-        # would be stretched (:meth:`_reach_sink_m`); kept only when it succeeds
-        self._sink = True
-        try:
-            low = self._step_once(*args)
-        finally:
-            self._sink = False
-        return low if low.ok else first
-
-    def _step_once(
-        self,
-        state: State,
-        leg: int,
-        tau: Trajectory,
-        step_m: float,
-        shrink,
-        target_W,
-        try_others,
-        body_hint: State | None = None,
-        knee: int | None = None,
-    ) -> Step:
-        """One attempt of :meth:`step` at the body height in force."""
         searched = searched_com = None
         if target_W is not None:
             target = np.asarray(target_W, float).reshape(3)
@@ -167,7 +140,7 @@ class Stepping:
     def out_of_time(self) -> bool:
         """Whether the run's time budget is spent or Ctrl-C asked it to stop.
 
-        A failing step then tries no other foothold and no lowered body (:meth:`step`):
+        A failing step then tries no other foothold (:meth:`step`):
         the driver's stop rules (:class:`planner.planning.driver.StopRules`) are checked
         between cycles, and one failing step may try a dozen footholds for tens of seconds.
         """

@@ -7,8 +7,8 @@ Lambda_t taken with the body at r_c* and moved off edges, the other footholds to
 that one fails, and the stride (long on level ground).
 
 :class:`Targets` is a part of :class:`planner.planning.local.LocalPlanner`; it uses the
-planner's ``robot``, ``terrain``, ``mu``, ``settings``, ``kin``, ``check``, ``_hips_B``
-and ``_sink`` (the step's back-off), its :meth:`com_height_m`, and the level-ground test
+planner's ``robot``, ``terrain``, ``mu``, ``settings``, ``kin``, ``check`` and ``_hips_B``,
+its :meth:`com_height_m`, and the level-ground test
 of :class:`planner.planning.level.LevelGround`.
 """
 
@@ -20,7 +20,6 @@ from planner.body.state import State
 from planner.motion.footholds import best_and_shortest, foothold_candidates
 from planner.motion.gait_queue import CRAWL
 from planner.motion.heuristics import (
-    TARGET_REACH_FRACTION,
     body_clearance_height_m,
     frame_from_directions,
     lambda_c,
@@ -194,14 +193,12 @@ class Targets:
         return self.sunk_target(state, leg, rc, tau, swing_target_W, heading)
 
     def sunk_target(self, state: State, leg: int, rc, tau: Trajectory, swing_target_W, heading):
-        """``rc`` lowered where a leg would be stretched, not below the body box's clearance.
+        """``rc`` lowered where a leg would pass ALWAYS_REACH_FRACTION of its reach.
 
-        Always beyond ALWAYS_REACH_FRACTION of a leg's reach, and to TARGET_REACH_FRACTION
-        when backing off from a failed step (:meth:`step`).
+        Not below the body box's clearance over the terrain.
         """
         rc = np.array(rc, float)
-        fraction = TARGET_REACH_FRACTION if self._sink else ALWAYS_REACH_FRACTION
-        sink = self._reach_sink_m(state, leg, rc, tau, swing_target_W, fraction)
+        sink = self._reach_sink_m(state, leg, rc, tau, swing_target_W, ALWAYS_REACH_FRACTION)
         if sink < 0.0:
             floor = body_clearance_height_m(self.robot, self.terrain, rc, heading)
             rc[2] = max(rc[2] + sink, min(rc[2], floor))
