@@ -311,8 +311,8 @@ def test_reach_cap_sinks_the_body_until_every_hip_reaches(littledog):
     # a hip beside its foot farther than the reach is left to Theta2 (sinking cannot help)
     centres = np.zeros((4, 3))
     hips = np.array([[0.0, 0.0, 0.1]] * 3 + [[0.5, 0.0, 0.1]])
-    assert reach_height_cap_m(littledog, hips, centres, range(4)) == 0.0
+    assert reach_height_cap_m(littledog, hips, centres, range(4), 0.9) == 0.0
     # only the listed legs count
     hips[0, 2] = 0.5
-    assert reach_height_cap_m(littledog, hips, centres, [1, 2]) == 0.0
-    assert reach_height_cap_m(littledog, hips, centres, [0]) < -0.3
+    assert reach_height_cap_m(littledog, hips, centres, [1, 2], 0.9) == 0.0
+    assert reach_height_cap_m(littledog, hips, centres, [0], 0.9) < -0.3

@@ -63,11 +63,6 @@ HAZARD_GRID_M = 0.003  # sampling step of the sharp terrain around a foothold [m
 # cannot climb out once the body has moved on
 PIT_HALF_WIDTH_M = 0.07
 PIT_DEPTH_M = 0.03
-# a step that failed is tried again with the body target sunk until every hip is within
-# this share of its leg's reach of its foot, not below the body box's clearance (Theta2
-# holds 0.96; a crawl stance reaches 0.94 before a hind leg swings, so always sinking to 0.9
-# would lower every walk, and a low body rolls as its hind legs cross a barrier)
-TARGET_REACH_FRACTION = 0.9
 MAX_SUPPORT_TILT_RAD = np.radians(30.0)  # the body follows the footholds' plane up to this tilt
 BODY_TARGET_CLEARANCE_M = 0.02  # body target: box bottom this high over the terrain (as Theta2)
 BODY_FOOTPRINT_GRID_M = 0.01  # sampling of the terrain under the body box (a thin barrier)
@@ -385,7 +380,7 @@ def reach_height_cap_m(
     hips_W: ArrayLike,
     centres_W: ArrayLike,
     legs: ArrayLike,
-    fraction: float = TARGET_REACH_FRACTION,
+    fraction: float,
 ) -> float:
     """How far [m] (<= 0) a body pose must sink for every hip to reach its foot's centre.
 

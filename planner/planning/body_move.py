@@ -8,9 +8,9 @@ COM target a body already placed stays where it is. Failed moves are remembered 
 run (:meth:`_body_move_once`).
 
 :class:`BodyMoves` is a part of :class:`planner.planning.local.LocalPlanner`; it uses the
-planner's ``robot``, ``terrain``, ``mu``, ``settings``, ``check``, ``_via_theta1``,
-and ``_failed_moves``, its Theta2 problems (:meth:`theta2`, :meth:`_count`), the
-targets (:class:`planner.planning.targets.Targets`), the path checks
+planner's ``robot``, ``terrain``, ``mu``, ``settings``, ``check``, ``_via_theta1`` and
+``_failed_moves``, its Theta2 problems (:meth:`theta2`, :meth:`_count`), the targets
+(:class:`planner.planning.targets.Targets`), the path checks
 (:class:`planner.planning.path_checks.PathChecks`) and the level-ground samples
 (:class:`planner.planning.level.LevelGround`).
 """

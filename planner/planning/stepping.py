@@ -9,10 +9,9 @@ recursive planner's look-ahead) or not to block the body (:mod:`planner.planning
 
 :class:`Stepping` is a part of :class:`planner.planning.local.LocalPlanner`; it uses the
 planner's ``settings``, ``_deadline_s`` (:func:`planner.planning.driver.plan_run`),
-``foothold_lookahead`` and ``foothold_passage``, its
-Theta2 problems (:meth:`theta2`, :meth:`_count`), the targets
-(:class:`planner.planning.targets.Targets`), the body moves, the swing and the knee
-choice.
+``foothold_lookahead`` and ``foothold_passage``, its Theta2 problems (:meth:`theta2`,
+:meth:`_count`), the targets (:class:`planner.planning.targets.Targets`), the body moves,
+the swing and the knee choice.
 """
 
 from __future__ import annotations
@@ -140,9 +139,9 @@ class Stepping:
     def out_of_time(self) -> bool:
         """Whether the run's time budget is spent or Ctrl-C asked it to stop.
 
-        A failing step then tries no other foothold (:meth:`step`):
-        the driver's stop rules (:class:`planner.planning.driver.StopRules`) are checked
-        between cycles, and one failing step may try a dozen footholds for tens of seconds.
+        A failing step then tries no other foothold (:meth:`step`): the driver's stop rules
+        (:class:`planner.planning.driver.StopRules`) are checked between cycles, and one
+        failing step may try a dozen footholds for tens of seconds.
         """
         return interrupts.requested() or time.perf_counter() > self._deadline_s
 
