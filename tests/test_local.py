@@ -118,8 +118,8 @@ def test_failed_step_is_retried_from_the_queue(flat_planner, monkeypatch):
     runs = [leg for k, leg in enumerate(attempts) if k == 0 or attempts[k - 1] != leg]
     assert runs[:4] == [2, 0, 3, 0], attempts
     first_fl = attempts[1 : attempts.index(3)]
-    # (its footholds, then once more with the body lower: the step's back-off)
-    assert set(first_fl) == {0} and len(first_fl) <= 2 * (1 + OTHER_FOOTHOLDS), attempts
+    # (its foothold and the others, each at most once: no step is tried a second time)
+    assert set(first_fl) == {0} and len(first_fl) <= 1 + OTHER_FOOTHOLDS, attempts
 
 
 # ---- planners over real terrain, checked by the independent validator ----------------------
