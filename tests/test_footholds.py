@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from planner.body.kinematics import hip_centre_B
+from planner.body.kinematics import hip_centre_B, kinematics_of
 from planner.motion.footholds import (
     BODY_SLACK_M,
     HIP_FOLLOW,
@@ -12,7 +12,13 @@ from planner.motion.footholds import (
     best_and_shortest,
     foothold_candidates,
 )
-from planner.motion.heuristics import EDGE_MARGIN_M, foothold_hazard
+from planner.motion.heuristics import (
+    EDGE_MARGIN_M,
+    STEP_FRACTION_OF_REACH,
+    foothold_hazard,
+    leg_room,
+    safe_foothold,
+)
 from planner.world.terrain import Terrain
 
 
@@ -73,6 +79,124 @@ def test_a_riser_counts_as_a_wall_ahead_of_the_foot_not_behind_it(littledog):
     assert "edge within" in foothold_hazard(
         down, past - [0.01, 0, 0], rho, 0.7, forward_W=[1, 0, 0]
     )
+
+
+def _leaning_pose(robot, leg):
+    """theta_nor with ``leg``'s foot half a stride behind its nominal place (Newton IK)."""
+    kin = kinematics_of(robot)
+    th = np.array(robot.theta_nor, float)
+    target = kin.foot_B(leg, th[leg]) - [0.5 * STEP_FRACTION_OF_REACH * robot.reach_m[leg], 0, 0]
+    th[leg] = kin.ik_leg_near(leg, target, th[leg]).joints_rad
+    assert np.allclose(kin.foot_B(leg, th[leg]), target, atol=1e-9)
+    return th, target
+
+
+def test_a_foothold_keeps_the_room_of_its_leg_links_before_a_riser(littledog):
+    """A riser ahead of a foot that would reach into the leg's links as the body moves on
+    refuses the foothold (LittleDog's hind knees point ahead of their feet).
+    Reference: the links' capsules placed by Pinocchio at the leaning stance, their exact
+    distance to the riser (where it is nearer than the ground) by the validator's surface
+    distance; no foothold is
+    allowed whose links would come within the keyframe margin of the riser, and a riser
+    the links clear by 5 mm more does not refuse it (the room is conservative by at most
+    a capsule radius)."""
+    import pinocchio as pin
+
+    from planner.body.links import KEYFRAME_ANGLE_RAD, KEYFRAME_MARGIN_M, leg_links
+    from planner.planfile.validate_surface import sharp_surface_distance
+
+    rho, links = littledog.foot_radius_m, leg_links(littledog)
+    data = littledog.model.createData()
+    flat = _terrain("flat")
+    checked = {True: 0, False: 0}  # refused where the links meet it, allowed where clear
+    for leg in (0, 2):  # a front leg (knee behind the foot) and a hind one
+        th, foot_B = _leaning_pose(littledog, leg)
+        caps = [c for c in links.capsules if c.leg == leg]
+        room = leg_room(littledog, leg)
+        for d in np.arange(0.045, 0.095, 0.01):
+            for h in np.arange(0.02, 0.13, 0.015):
+                edge = 0.8
+                foot_W = np.array([edge - d, foot_B[1], rho])
+                q = littledog.q_from(foot_W - foot_B, np.array([0.0, 0.0, 0.0, 1.0]), th)
+                pin.forwardKinematics(littledog.model, data, q)
+                up = _terrain("step", x=edge, height=float(h))
+                slack = np.inf
+                for c in caps:
+                    M = data.oMi[c.joint_id]
+                    a, b = M.rotation @ c.a_J + M.translation, M.rotation @ c.b_J + M.translation
+                    pts = a + np.linspace(0, 1, 40)[:, None] * (b - a)
+                    need = KEYFRAME_MARGIN_M + KEYFRAME_ANGLE_RAD * np.linalg.norm(
+                        pts - foot_W, axis=1
+                    )
+                    dist = sharp_surface_distance(up, pts, 0.05)
+                    riser = dist < sharp_surface_distance(flat, pts, 0.05) - 1e-6  # not ground
+                    if np.any(riser):
+                        slack = min(slack, float(np.min((dist - c.radius_m - need)[riser])))
+                contact = [edge - d, foot_B[1], 0.0]
+                why = foothold_hazard(up, contact, rho, 0.7, forward_W=[1, 0, 0], room=room)
+                if slack < -0.001:
+                    assert why, (leg, d, h, slack)
+                    checked[True] += 1
+                elif slack > 0.005 + max(c.radius_m for c in caps):
+                    assert why == "", (leg, d, h, slack, why)
+                    checked[False] += 1
+    assert min(checked.values()) >= 5, checked
+    # LittleDog's front knees point back: beyond the toe's room only a riser as tall as
+    # the hip meets the front leg's links
+    assert leg_room(littledog, 0).height_at(np.arange(0.042, 0.09, 0.003)).min() > 0.1
+    # walking away from the riser, or with it beside the foot, the room does not apply
+    up = _terrain("step", x=0.8, height=0.05)
+    hind = leg_room(littledog, 3)
+    before = np.array([0.756, -0.066, 0.0])
+    assert "room" in foothold_hazard(up, before, rho, 0.7, forward_W=[1, 0, 0], room=hind)
+    assert foothold_hazard(up, before, rho, 0.7, forward_W=[1, 0, 0]) == ""  # the toe alone
+    assert foothold_hazard(up, before, rho, 0.7, forward_W=[0, 1, 0], room=hind) == ""
+    # a thin barrier is crossed whole (the knee branch flips there): no room before it
+    barrier = _terrain("barrier", x=0.8, height=0.075, thickness=0.03)
+    for x in (0.71, 0.756):
+        foot = np.array([x, -0.066, 0.0])
+        assert foothold_hazard(barrier, foot, rho, 0.7, forward_W=[1, 0, 0], room=hind) == ""
+    # Lambda_t's target in the riser's room goes to the top, not before it
+    got, why = safe_foothold(up, [0.794, -0.066, 0.0], [1, 0, 0], rho, room=hind)
+    assert why == "" and got[0] > 0.8 and got[2] == pytest.approx(0.05, abs=1e-4)
+    got, why = safe_foothold(up, [0.794, -0.066, 0.0], [1, 0, 0], rho)
+    assert why == "" and got[0] < 0.8  # (the toe's room alone: before it)
+
+
+@pytest.mark.parametrize("height", [0.05, 0.1])
+def test_a_target_in_the_leg_room_crosses_the_riser_and_one_at_the_toe_goes_nearest(
+    littledog, height
+):
+    """safe_foothold with a hind leg's room, a riser at x = 0.8 m: a target the toe's rule
+    accepts but the room refuses is moved onto the riser's top (within the shift allowed);
+    a target the toe's rule refuses goes to the nearest safe point (none nearer is safe);
+    every point returned is a foothold the room accepts, and the room changes nothing far
+    from the riser."""
+    rho, hind = littledog.foot_radius_m, leg_room(littledog, 3)
+    up = _terrain("step", x=0.8, height=height)
+    fwd = [1, 0, 0]
+
+    def safe(x, room):
+        got, why = safe_foothold(up, [x, -0.066, 0.0], fwd, rho, room=room, max_shift_m=0.09)
+        assert why == ""
+        assert foothold_hazard(up, got, rho, 0.7, forward_W=fwd, room=hind) == ""
+        return got
+
+    only_room = 0.8 - 0.045  # past the toe's 4 cm, inside the room (5.8 cm for 5 cm)
+    assert foothold_hazard(up, [only_room, -0.066, 0.0], rho, 0.7, forward_W=fwd) == ""
+    assert "room" in foothold_hazard(up, [only_room, -0.066, 0.0], rho, 0.7, forward_W=fwd,
+                                     room=hind)  # fmt: skip
+    got = safe(only_room, hind)
+    assert got[0] > 0.8 and got[2] == pytest.approx(height, abs=1e-4)
+    at_toe = 0.77  # 3 cm before the riser: the toe's rule refuses it
+    got = safe(at_toe, hind)
+    shift = abs(got[0] - at_toe)
+    for d in np.arange(0.0, shift - 0.011, 0.01):  # nothing nearer is safe
+        for x in (at_toe - d, at_toe + d):
+            z = float(up.height(x, -0.066))
+            assert foothold_hazard(up, [x, -0.066, z], rho, 0.7, forward_W=fwd, room=hind)
+    far = [0.5, -0.066, 0.0]
+    assert np.allclose(safe(far[0], hind), far) and np.allclose(safe(far[0], None), far)
 
 
 def test_the_floor_of_a_narrow_trench_is_refused_walking_either_way(littledog):

@@ -304,6 +304,38 @@ class LegLinks:
             b.append(R @ cap.b_J + t)
         return np.array(a), np.array(b)
 
+    def silhouette_m(self, leg: int, joints_rad, grid_m: float, length_m: float) -> _Array:
+        """Lowest height of ``leg``'s links over the ground ahead of its foot, at a posture.
+
+        ``joints_rad`` (3,) the leg's joints, the body level. Element k: over the
+        horizontal distance ``k grid_m`` ahead of the foot centre (body x, up to
+        ``length_m``), the lowest point of the leg's capsules less the keyframe margin
+        (``KEYFRAME_MARGIN_M`` + ``KEYFRAME_ANGLE_RAD`` x its distance to the foot), in metres
+        above the foot's contact point on level ground; inf where no link is. Terrain ahead
+        higher than this meets the links.
+        """
+        th = np.array(self.robot.theta_nor, float)
+        th[leg] = np.asarray(joints_rad, float)
+        self._fk(self.robot.q_from(np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]), th))
+        foot = np.asarray(self.data.oMf[self._foot_ids[leg]].translation, float)
+        ds = grid_m * np.arange(int(np.ceil(length_m / grid_m)) + 1)
+        low = np.full(len(ds), np.inf)
+        for cap in self.capsules:
+            if cap.leg != leg:
+                continue
+            M = self.data.oMi[cap.joint_id]
+            a = np.asarray(M.rotation) @ cap.a_J + np.asarray(M.translation)
+            b = np.asarray(M.rotation) @ cap.b_J + np.asarray(M.translation)
+            k = max(2, int(np.ceil(np.linalg.norm(b - a) / (0.25 * grid_m))) + 1)
+            pts = a + np.linspace(0.0, 1.0, k)[:, None] * (b - a)
+            need = KEYFRAME_MARGIN_M + KEYFRAME_ANGLE_RAD * np.linalg.norm(pts - foot, axis=1)
+            z = pts[:, 2] - foot[2] + self.robot.foot_radius_m - cap.radius_m - need
+            band = (cap.radius_m + need)[:, None]  # a section's width, with its margin
+            over = np.abs(ds[None, :] - (pts[:, 0] - foot[0])[:, None]) <= band
+            low = np.minimum(low, np.where(over, z[:, None], np.inf).min(axis=0))
+        low[0] = np.inf  # under the foot itself: the foot's own edge rules
+        return low
+
     def path_margin(
         self, terrain, q: _Array, swing_legs=(), scale: float = 1.0, legs=None
     ) -> _Array:

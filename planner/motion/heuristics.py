@@ -15,12 +15,14 @@ Legs are 0-based here (FL=0 .. HR=3); the paper's leg i_f is ``i_f + 1``.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from planner.body.kinematics import kinematics_of
+from planner.body.kinematics import kinematics_of, robot_cached
+from planner.body.links import leg_links
 from planner.body.stability import support_margin_m
 
 if TYPE_CHECKING:
@@ -47,6 +49,8 @@ __all__ = [
     "normal_foot_centre_W",
     "frame_from_directions",
     "foothold_hazard",
+    "LegRoom",
+    "leg_room",
     "horizontal_axes",
     "safe_foothold",
 ]
@@ -56,6 +60,7 @@ STEP_FRACTION_OF_REACH = 0.35  # default stride = 0.35 * leg reach (0.063 m for 
 DEFAULT_NORMAL_RADIUS_M = 0.1  # [m] smoothing radius of u_n when no robot is given
 EDGE_MARGIN_M = 0.015  # a foothold keeps this much beyond the foot radius from an edge [m]
 WALL_RADIUS_M = 0.04  # a foothold this close to a higher edge (a riser, a pit wall) is refused
+# (and a leg whose links reach further ahead of its foot keeps their room: leg_room)
 WALL_HEIGHT_M = 0.01  # ... when the top of that edge is this much higher [m]
 HAZARD_GRID_M = 0.003  # sampling step of the sharp terrain around a foothold [m]
 # a foothold with terrain PIT_DEPTH_M higher both within PIT_HALF_WIDTH_M ahead of it and
@@ -499,6 +504,55 @@ def lambda_t(
 
 
 # ---- safe footholds (beyond the paper) -------------------------------------------------------
+@dataclass(frozen=True)
+class LegRoom:
+    """The room a leg's links need before a riser ahead of its foot (:func:`leg_room`).
+
+    ``low_m[k]``: the lowest height of the links above the foot's contact point over the
+    distance ``HAZARD_GRID_M * k`` ahead of the foot (inf where no link is).
+    """
+
+    low_m: np.ndarray
+
+    @property
+    def extent_m(self) -> float:
+        """How far ahead of the foot the links reach [m]."""
+        finite = np.flatnonzero(np.isfinite(self.low_m))
+        return HAZARD_GRID_M * (int(finite[-1]) if len(finite) else 0)
+
+    def height_at(self, d_m: np.ndarray) -> np.ndarray:
+        """The links' lowest height at distances ``d_m`` ahead (inf beyond them)."""
+        d = np.asarray(d_m, float)
+        k = np.clip(np.round(d / HAZARD_GRID_M).astype(int), 0, len(self.low_m) - 1)
+        return np.where(d < HAZARD_GRID_M * len(self.low_m), self.low_m[k], np.inf)
+
+
+def leg_room(robot, leg: int) -> LegRoom:
+    """The room ``leg``'s links need before a riser ahead of its foot.
+
+    The silhouette of the leg's thigh and shank ahead of its foot
+    (:meth:`planner.body.links.LegLinks.silhouette_m`) in the most forward-leaning
+    posture of a stance leg of the crawl: theta_nor with the foot half a stride
+    (``STEP_FRACTION_OF_REACH`` x reach / 2) behind its nominal place (the body advances
+    a stride over a planted foot that landed half a stride ahead). A riser that reaches
+    into it meets the knee as the body moves on (LittleDog's hind knees point ahead of
+    their feet: a 5 cm riser 4.4 cm ahead of the foot; a front leg, its knee pointing back,
+    meets only a riser as tall as its hip).
+    """
+    cache = robot_cached(robot, "_leg_rooms", lambda _: {})
+    if leg not in cache:
+        kin = kinematics_of(robot)
+        th = np.asarray(robot.theta_nor[leg], float)
+        stride = STEP_FRACTION_OF_REACH * float(robot.reach_m[leg])
+        back = kin.foot_B(leg, th) - np.array([0.5 * stride, 0.0, 0.0])
+        joints = kin.ik_leg_near(leg, back, th).joints_rad
+        low = leg_links(robot).silhouette_m(
+            leg, joints, HAZARD_GRID_M, 0.5 * float(robot.reach_m[leg])
+        )
+        cache[leg] = LegRoom(low)
+    return cache[leg]
+
+
 def foothold_hazard(
     terrain,
     point_W: ArrayLike,
@@ -506,6 +560,7 @@ def foothold_hazard(
     mu: float = 0.7,
     edge_margin_m: float = EDGE_MARGIN_M,
     forward_W: ArrayLike | None = None,
+    room: LegRoom | None = None,
 ) -> str:
     """Why a contact point is a poor foothold, or "" when it is a good one.
 
@@ -516,7 +571,9 @@ def foothold_hazard(
     ``radius_m + edge_margin_m`` (the foot would rest on or slip off it), or an edge within
     ``WALL_RADIUS_M`` whose top is ``WALL_HEIGHT_M`` above the point (a toe against a riser
     or at the bottom of a pit). With ``forward_W`` (the walking direction) only such walls
-    ahead of the point or beside it count: one behind it is the edge the leg has just
+    ahead of the point or beside it count, and with ``room`` (:func:`leg_room`) a riser
+    straight ahead that reaches into the leg's links (:func:`_riser_in_room`): one behind
+    it is the edge the leg has just
     stepped down from, which the foot leaves behind and whose clearance from the leg's
     links the planner checks exactly (counting it kept a foot stepping down off a step too
     far from the riser, out of the leg's reach); but a point with terrain ``PIT_DEPTH_M``
@@ -542,10 +599,12 @@ def foothold_hazard(
     if np.any(edge & (R <= r_edge)):
         return f"an edge within {r_edge * 100:.1f} cm"
     near = edge & (R <= WALL_RADIUS_M)
-    if forward_W is not None:
-        f, _ = horizontal_axes(forward_W)
-        near &= (X - p[0]) * f[0] + (Y - p[1]) * f[1] >= -float(radius_m)
     h0 = float(np.asarray(terrain.height_sharp(p[0], p[1]), float))
+    if forward_W is not None:
+        f, side = horizontal_axes(forward_W)
+        near &= (X - p[0]) * f[0] + (Y - p[1]) * f[1] >= -float(radius_m)
+        if room is not None and _riser_in_room(terrain, p, f, side, h0, room, r_edge, mu):
+            return f"a riser ahead within the leg's room ({room.extent_m * 100:.1f} cm)"
     if np.any(near) and float(H[near].max()) > h0 + WALL_HEIGHT_M:
         return (
             f"an edge {float(H[near].max()) - h0:.3f} m higher within {WALL_RADIUS_M * 100:.0f} cm"
@@ -557,6 +616,32 @@ def foothold_hazard(
         if min(float(ahead.max()), float(behind.max())) > h0 + PIT_DEPTH_M:
             return f"the floor of a trench or pit (walls within {PIT_HALF_WIDTH_M * 100:.0f} cm)"
     return ""
+
+
+def _riser_in_room(terrain, p, f, side, h0, room: LegRoom, r_edge, mu) -> bool:
+    """Whether a riser to climb onto reaches into ``room`` ahead of ``p``.
+
+    Five lines along ``f`` (``WALL_RADIUS_M`` either side) sampled every ``HAZARD_GRID_M``
+    up to the room's extent: an edge (slope beyond ``mu``) whose top is higher above
+    ``h0`` than ``WALL_HEIGHT_M`` and than the links there, where the terrain is higher
+    too from the extent on for a foothold's width (``2 r_edge``): a thin barrier the foot
+    crosses whole does not count (the room would make the stride over it too long; the
+    knee branch flips there, :mod:`planner.planning.landing`).
+    """
+    reach = room.extent_m
+    top = p[:2] + np.outer(reach + np.array([0.0, 1.0, 2.0]) * r_edge, f[:2])
+    if not np.all(
+        np.asarray(terrain.height_sharp(top[:, 0], top[:, 1]), float) > h0 + WALL_HEIGHT_M
+    ):
+        return False  # no foothold's width of top past the room: a barrier, crossed whole
+    d = np.arange(0.0, reach + 0.5 * HAZARD_GRID_M, HAZARD_GRID_M)
+    lat = np.linspace(-WALL_RADIUS_M, WALL_RADIUS_M, 5)
+    pts = p[None, None, :2] + d[None, :, None] * f[:2] + lat[:, None, None] * side[:2]
+    H = np.asarray(terrain.height_sharp(pts[..., 0].ravel(), pts[..., 1].ravel()), float)
+    H = H.reshape(len(lat), len(d))
+    steep = np.abs(np.diff(H, axis=1)) > mu * HAZARD_GRID_M
+    floor = np.maximum(WALL_HEIGHT_M, room.height_at(d[1:]))[None, :]
+    return bool(np.any(steep & (H[:, 1:] > h0 + floor)))
 
 
 def horizontal_axes(forward_W: ArrayLike) -> tuple[_Array, _Array]:
@@ -580,6 +665,7 @@ def safe_foothold(
     lateral_step_m: float = 0.015,
     lateral_cost: float = 1.5,
     not_behind_W: ArrayLike | None = None,
+    room: LegRoom | None = None,
 ) -> tuple[np.ndarray, str]:
     """The foothold nearest ``target_W`` without a :func:`foothold_hazard` (beyond the paper).
 
@@ -591,8 +677,11 @@ def safe_foothold(
     order of ``|d| + lateral_cost |l|`` (a shorter stride before a longer one at equal
     cost). With ``not_behind_W`` (the foot's current contact point), candidates that are
     not ahead of it along ``forward_W`` are skipped: a lagging leg must not be sent back
-    in front of a gap it has to cross. Returns (point on the terrain, "") or (the original
-    target, the hazard) when none is safe.
+    in front of a gap it has to cross. ``room``: the leg's room before a riser
+    (:func:`leg_room`), kept by every candidate; a target that only the room refuses (the
+    toe's rule accepts it) is moved ahead, onto the riser's top, before it is moved back.
+    Returns (point on the terrain, "") or (the original target, the
+    hazard) when none is safe.
     """
     t = np.asarray(target_W, float).reshape(3)
     f, side = horizontal_axes(forward_W)
@@ -604,13 +693,24 @@ def safe_foothold(
         for lat in lateral_step_m * np.arange(-m, m + 1)
     ]
     cands.sort(key=lambda c: c[:2])
+    h0 = float(np.asarray(terrain.height_sharp(t[0], t[1]), float))
+    r_edge = float(radius_m) + EDGE_MARGIN_M
+    if (
+        room is not None
+        and _riser_in_room(terrain, t, f, side, h0, room, r_edge, mu)
+        and not foothold_hazard(terrain, t, radius_m, mu, forward_W=f)
+    ):
+        # only the room refuses the target (the toe's rule accepts it): cross the riser
+        # (a foot stopped short of it is left a longer stride onto it, from where the body
+        # has moved on); a target the toe's rule refuses goes to the nearest safe point
+        cands = [c for c in cands if c[2] > 0] + [c for c in cands if c[2] <= 0]
     first = ""
     for _, _, d, lat in cands:
         c = t + d * f + lat * side
         if not_behind_W is not None and float((c - np.asarray(not_behind_W, float)) @ f) <= 0:
             continue
         c[2] = float(np.asarray(terrain.height(c[0], c[1]), float))
-        why = foothold_hazard(terrain, c, radius_m, mu, forward_W=f)
+        why = foothold_hazard(terrain, c, radius_m, mu, forward_W=f, room=room)
         if not why:
             return c, ""
         first = first or why

@@ -24,6 +24,7 @@ from planner.motion.heuristics import (
     frame_from_directions,
     lambda_c,
     lambda_t,
+    leg_room,
     reach_height_cap_m,
     reference_directions,
     safe_foothold,
@@ -102,7 +103,12 @@ class Targets:
         Lambda_t is taken with the body at r_c* (where the body move will bring it), so
         the foothold matches the stance the leg swings from; :func:`safe_foothold` then
         moves it to the nearest point of the sharp terrain without an edge under the foot
-        (beyond the paper). ``hazard`` is "" or why no safe point was found nearby.
+        (beyond the paper), and out of the room the leg's links need before a riser
+        (:func:`planner.motion.heuristics.leg_room`), a greedy step's guess at what the
+        body's advance over the foot will need; the look-ahead of 8.5
+        (``foothold_lookahead``: the recursive planner, soft's retraced steps) checks the
+        next body move itself and goes without it. ``hazard`` is "" or why no safe point
+        was found nearby.
         """
         target = self.stride_target(state, leg, tau, step_m, shrink)
         u_f, _ = reference_directions(tau, self.terrain, target)
@@ -114,6 +120,7 @@ class Targets:
             self.mu,
             max_shift_m=max(step_m, 0.5 * float(np.min(self.robot.reach_m))),
             not_behind_W=state.feet_W[leg],
+            room=None if self.foothold_lookahead else leg_room(self.robot, leg),
         )
 
     def stride_target(
