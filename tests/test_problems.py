@@ -59,20 +59,28 @@ def terrain_mu(terrain):
     return float(terrain.spec.get("friction", 0.7))
 
 
+@pytest.mark.parametrize("rolling", [False, True])
 @pytest.mark.parametrize("name,x", STANCES)
-def test_theta2_moves_com_over_three_feet(dog, name, x):
+def test_theta2_moves_com_over_three_feet(dog, name, x, rolling):
     terrain, placed, u_f, u_n = _placed(dog, name, x)
     start = placed.state
     support = (1, 2, 3)  # FL about to swing
-    problem = Theta2(dog, terrain, support=support)
+    problem = Theta2(dog, terrain, support=support, options=ThetaOptions(rolling_feet=rolling))
     rc = start.feet_W[list(support)].mean(axis=0) + 0.15 * u_n
     sol = problem.solve(start, rc, u_f, u_n)
     assert sol.feasible, sol.diagnosis
     assert sol.max_violation() < FEASIBILITY_TOL
     np.testing.assert_array_equal(sol.state.feet_W, start.feet_W)  # same leaf of S0
-    # forces of the S^-1 formulation equal the statics module's eq. 5
+    # forces of the S^-1 formulation equal the statics module's eq. 5 on the contacts: the
+    # start's, or with rolling feet those the spheres rolled to, FK of the solved joints
+    # (Pinocchio's frames, not the rolling model) less a radius along the start's normals
     com = problem.check.com_W(sol.state)
-    ref = statics.equilibrating_forces(start.feet_W, com, dog.total_mass_kg, support)
+    contacts = start.feet_W
+    if problem.rolls_feet:
+        n = terrain.normal(start.feet_W)
+        contacts = problem.check.foot_centres_W(sol.state) - dog.foot_radius_m * n
+        assert 1e-4 < np.abs(contacts[list(support)] - start.feet_W[list(support)]).max() < 0.02
+    ref = statics.equilibrating_forces(contacts, com, dog.total_mass_kg, support)
     np.testing.assert_allclose(sol.state.forces_W, ref.forces, atol=1e-9)
     # objective no worse than the (feasible) start's
     p = problem.params(start, rc, u_f, u_n)

@@ -116,3 +116,61 @@ def test_mujoco_feet_roll_as_planned(littledog):
         err[name] = m.final_error_3d_m
     # the servos track to a degree or so; the rolling model removes the systematic part
     assert err["rolling"] < 0.6 * err["fixed"], err
+
+
+def test_rolled_centres_in_casadi_are_pinocchios_log_with_exact_derivatives(littledog):
+    """Theta2's rolling (c + rho w x n) against rolled_centres_W (w by Pinocchio's log3),
+    its Jacobian against central differences, both at and away from zero rotation."""
+    import casadi as ca
+
+    from planner.body.kinematics import kinematics_of
+    from planner.body.rolling import leg_rotations_W, rolled_centres_W, rolled_centres_W_ca
+
+    kin = kinematics_of(littledog)
+    rng = np.random.default_rng(5)
+    R0, j0 = pin.exp3(rng.normal(size=3)), littledog.theta_nor.copy()
+    shanks = leg_rotations_W(kin, R0, j0)
+    c0 = rng.normal(size=(4, 3))
+    n = rng.normal(size=(4, 3))
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    th = ca.SX.sym("th", 12)
+    expr = rolled_centres_W_ca(kin, ca.DM(R0), th, ca.DM(c0.T), ca.DM(n.T),
+                               ca.DM(np.column_stack([R.T.ravel() for R in shanks])))  # fmt: skip
+    f = ca.Function("f", [th], [ca.vec(expr)])
+    jac = ca.Function("J", [th], [ca.jacobian(ca.vec(expr), th)])
+    for joints in (j0, j0 + rng.normal(scale=0.4, size=(4, 3))):
+        want = rolled_centres_W(kin, R0, joints, c0, shanks, n)
+        np.testing.assert_allclose(np.array(f(joints.ravel())).reshape(4, 3), want, atol=1e-12)
+        J = np.array(jac(joints.ravel()))
+        h, fd = 1e-6, np.zeros_like(J)
+        for k in range(12):
+            e = np.zeros(12)
+            e[k] = h
+            fd[:, k] = (np.array(f(joints.ravel() + e)) - np.array(f(joints.ravel() - e))).ravel()
+        np.testing.assert_allclose(J, fd / (2 * h), atol=1e-8)
+    np.testing.assert_allclose(np.array(f(j0.ravel())).reshape(4, 3), c0, atol=1e-15)
+
+
+@pytest.mark.parametrize("terrain_name", ["flat", "rough2cm"])
+def test_theta2_poses_the_legs_where_the_path_rolls_the_feet(littledog, terrain_name):
+    """Theta2 solves for the centres its stance spheres roll to: the interpolated path
+    (rolling, the validator's model) ends within 0.1 mm of them, where the paper's fixed
+    contacts (``rolling_feet`` off) end millimetres off."""
+    from planner.problems.options import ThetaOptions
+
+    terrain = load_terrain(terrain_name)
+    z = float(terrain.height(1.2, 0.0)) + 0.15
+    a = Theta4(littledog, terrain).solve([1.2, 0.0, z], [1, 0, 0], [0, 0, 1]).state
+    rc = a.feet_W[[1, 2, 3]].mean(axis=0) + [0.0, 0.0, 0.15]
+    misses = {}
+    for rolling in (True, False):
+        opts = ThetaOptions(rolling_feet=rolling)
+        sol = Theta2(littledog, terrain, support=(1, 2, 3), options=opts).solve(
+            a, rc, [1, 0, 0], [0, 0, 1]
+        )
+        assert sol.feasible, sol.diagnosis
+        path = interpolate_leaf(littledog, terrain, a, sol.state, 12)
+        (c0, end, posed), _ = _pinocchio_feet(littledog, [a, path[-1], sol.state])
+        assert np.abs(end - c0).max() > 2e-3  # the feet rolled millimetres
+        misses[rolling] = float(np.linalg.norm(end - posed, axis=1).max())
+    assert misses[True] < 1e-4 and misses[False] > 2e-3, misses

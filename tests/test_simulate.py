@@ -672,12 +672,13 @@ def test_a_correction_turns_the_body_from_its_measured_attitude(short_plan):
 
 
 def test_a_correction_moves_the_body_toward_a_foot_out_of_reach(short_plan, monkeypatch):
-    """8.4 from a stance foot measured 36 mm behind the plan's (FR, in the cycle where HR
-    swings): the plan's body, shifted by the feet's mean offset, leaves FR out of reach
-    (barrier9cm's recursive plan, HR stretched: refused, the walk left the plan and
-    stalled). The corrected body moves toward it by one offset (at most REACH_SHIFT_M),
-    taken on over the four-feet phase from the measured pose, and FK of the corrected
-    joints puts the stance feet on their measured centres plus the plan's rolling."""
+    """8.4 from a stance foot measured behind the plan's (FR, in the cycle where HR swings),
+    the least offset of 30-60 mm for which the plan's body, shifted by the feet's mean
+    offset, leaves FR out of reach (barrier9cm's recursive plan, HR stretched: refused, the
+    walk left the plan and stalled). The corrected body moves toward it by one offset (at
+    most REACH_SHIFT_M), taken on over the four-feet phase from the measured pose, and FK of
+    the corrected joints puts the stance feet on their measured centres plus the plan's
+    rolling."""
     import planner.sim.correction as correction
     from planner.body.kinematics import kinematics_of
     from planner.core.lie import rotation_from_quat
@@ -691,17 +692,22 @@ def test_a_correction_moves_the_body_toward_a_foot_out_of_reach(short_plan, monk
     q_plan, contact = s.q[a : b + 1], s.contact[a : b + 1]
     assert contact[:, leg].all() and not contact[:, 3].all()  # FR stands while HR swings
     centres = short_plan.foot_centres_W()[a : b + 1]
-    R0, joints = rotation_from_quat(q_plan[0, 3:7]), robot.joints_from_q(q_plan[0]).copy()
-    ik = kin.ik_leg(leg, R0.T @ (centres[0, leg] - [0.036, 0.0, 0.0] - q_plan[0, :3]))
-    assert ik.reachable  # the measured robot stands so
-    joints[leg] = ik.joints_rad
-    meas = Measurement(0.0, robot.q_from(q_plan[0, :3], q_plan[0, 3:7], joints), np.ones(4, bool))
-    times = s.time[a : b + 1]
-    monkeypatch.setattr(correction, "REACH_SHIFT_M", 0.0)
-    q_plain, plain_misses = correct_cycle(robot, q_plan, contact, centres, meas, times)
-    monkeypatch.undo()
+    R0, times = rotation_from_quat(q_plan[0, 3:7]), s.time[a : b + 1]
+    for offset_m in np.arange(0.030, 0.0601, 0.002):
+        joints = robot.joints_from_q(q_plan[0]).copy()
+        ik = kin.ik_leg(leg, R0.T @ (centres[0, leg] - [offset_m, 0.0, 0.0] - q_plan[0, :3]))
+        assert ik.reachable  # the measured robot stands so
+        joints[leg] = ik.joints_rad
+        meas_q = robot.q_from(q_plan[0, :3], q_plan[0, 3:7], joints)
+        meas = Measurement(0.0, meas_q, np.ones(4, bool))
+        monkeypatch.setattr(correction, "REACH_SHIFT_M", 0.0)
+        q_plain, plain_misses = correct_cycle(robot, q_plan, contact, centres, meas, times)
+        monkeypatch.undo()
+        if plain_misses > 0:
+            break
+    assert plain_misses > 0, "no offset up to 60 mm leaves FR out of reach"
     q, misses = correct_cycle(robot, q_plan, contact, centres, meas, times)
-    assert plain_misses > 0 and misses == 0, (plain_misses, misses)
+    assert misses == 0, (offset_m, plain_misses, misses)
     shift = q[:, :3] - q_plain[:, :3]
     np.testing.assert_allclose(shift[0], 0.0, atol=1e-12)  # starts at the measured base
     lift = int(np.flatnonzero(~contact.all(axis=1))[0])

@@ -192,7 +192,11 @@ def test_a_body_move_on_a_slope_accelerates_only_as_its_feet_can_carry(littledog
     planner = SoftPlanner(littledog, slope)
     tau = Trajectory.straight((0.0, 0.0), (0.5, 0.0), slope, planner.com_height_m())
     state = planner.initial_state((0.0, 0.0), tau)
-    step = planner.step(state, 2, tau, planner.stride_m())
+    for fraction in (1.0, 0.8, 0.6):  # a body move onto three feet (the stride's swing-ready
+        # pose is out of reach from some), the law's subject
+        step = planner.step(state, 2, tau, fraction * planner.stride_m())
+        if step.moved is not None:
+            break
     assert step.moved is not None, step.diagnosis
     path = step.body_path
     planner.settings = replace(planner.settings, body_speed_m_s=1.0, body_accel_m_s2=3.0)
@@ -299,7 +303,11 @@ def test_a_body_move_over_an_edge_goes_no_faster_than_its_clearance_allows(littl
     planner = SoftPlanner(littledog, flat)
     tau = Trajectory.straight((0.2, 0.0), (0.6, 0.0), flat, planner.com_height_m())
     state = planner.initial_state((0.2, 0.0), tau)
-    step = planner.step(state, 2, tau, planner.stride_m())
+    for fraction in (1.0, 0.8, 0.6):  # a body move onto three feet (the stride's swing-ready
+        # pose is out of reach from some), the law's subject
+        step = planner.step(state, 2, tau, fraction * planner.stride_m())
+        if step.moved is not None:
+            break
     assert step.moved is not None, step.diagnosis
     path = step.body_path
     lo, hi = littledog.body_box_B

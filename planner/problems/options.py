@@ -89,6 +89,7 @@ class ThetaOptions:
     target_length_m: float = 0.01  # Theta3 sigma1 = exp(-|r - r_t|^2 / (2 target_length_m^2))
     joint_scale_rad: float = 1.0  # sigma3 = exp(-|theta - theta_nor|^2 / (2 joint_scale^2))
     jit: bool = False  # NLP functions compiled to C, cached on disk (planner.problems.compiled)
+    rolling_feet: bool = False  # Theta2 solves for the centres its stance spheres roll to (4.3)
     mu_init: float | None = 1e-3  # None: IPOPT's adaptive strategy from 0.1
 
 

@@ -37,11 +37,21 @@ class Theta1(Theta2):
 
     name = "Theta1"
     fix_com = True
+    rolls = False  # a via pose on the path's own samples (planner.planning.body_move)
 
     def __init__(self, robot, terrain, support=(0, 1, 2, 3), options=None, mu: float = 0.7,
-                 height_band_m: float = 0.0):  # fmt: skip
+                 height_band_m: float = 0.0, torque_rows: bool = False,
+                 sway_rows: bool = False):  # fmt: skip
         self.height_band_m = float(height_band_m)
-        super().__init__(robot, terrain, support, options, mu)
+        super().__init__(robot, terrain, support, options, mu, torque_rows=torque_rows,
+                         sway_rows=sway_rows)  # fmt: skip
+
+    def _sibling(self, sway: bool) -> Theta1:
+        """This problem, COM still pinned, with the torque (and sway) rows."""
+        return Theta1(
+            self.robot, self.terrain, self.support, self.options, self.mu, self.height_band_m,
+            torque_rows=True, sway_rows=sway,
+        )  # fmt: skip
 
     def force_precheck(self, start: State, rc_star_W) -> tuple[bool, str]:
         """Whether the eq. 5 forces at COM r_c* satisfy (d) and (e) (section 7.2)."""

@@ -10,6 +10,15 @@ joints are variables tied to the footholds by the forward kinematics equalities
 FK_i(p, phi, theta_i) = r_i* + rho n_i: the same leaf, with smooth exact derivatives;
 reachability and joint limits become ordinary constraints and bounds.
 
+Beyond the paper's leaf, whose contact points stay still, the sphere feet can roll
+(``ThetaOptions.rolling_feet``, off by default; :mod:`planner.body.rolling`): a stance
+sphere's centre ends
+at r_i* + rho n_i + rho w_i x n_i, w_i its shank's rotation vector since the start (a
+smooth function of the pose and joints, exact derivatives), and the pose is solved for
+those centres, the contacts, forces and balance taken there. The interpolated path rolls
+the feet the same way, so it ends on this pose (3-4 mm median, 1 cm at a riser, off it
+with the contact points held).
+
 Constraints (section 7.3): (a) |phi| <= pi, (b) every vertex of P at least delta_c above
 the terrain, (c) joint limits, (d) F_i.n_i > 0 and (e) friction cones for the eq. 5 forces
 of the weight-carrying feet (switchable). Objective: sigma1 (forward axis along u_f),
@@ -42,6 +51,7 @@ import numpy as np
 
 from planner.body import stability, statics
 from planner.body.kinematics import hip_point_B
+from planner.body.rolling import leg_rotations_W, rolled_centres_W, rolled_centres_W_ca
 from planner.body.state import S0, State
 from planner.body.stiffness import joint_sway_matrix_ca, sway_stiffness_of
 from planner.body.torques import TorqueCheck, joint_efforts_nm, least_squares_ratios_ca
@@ -98,6 +108,7 @@ class Theta2(ThetaProblem):
 
     name = "Theta2"
     fix_com = False
+    rolls = True  # the stance feet roll over the move (ThetaOptions.rolling_feet)
     height_band_m = 0.0  # Theta1's band for the pinned COM's height (0: pinned in 3-D)
 
     def __init__(
@@ -122,6 +133,18 @@ class Theta2(ThetaProblem):
         self._sway_problem = None  # ... and with the sway-stiffness rows
         super().__init__(robot, terrain, options or ThetaOptions(), mu)
 
+    @property
+    def rolls_feet(self) -> bool:
+        """Whether the stance spheres roll with their shanks (``rolling_feet``, 4.3).
+
+        The paper's leaves hold each contact point still; a sphere foot that does not slide
+        rolls, millimetres per body move (:mod:`planner.body.rolling`), and the pose is
+        solved for the centres it rolls to: ``c + rho w x n``, w the shank's rotation from
+        the start. The state's ``feet_W`` stay the start's (the move's leaf); its joints
+        reach the rolled centres.
+        """
+        return self.rolls and self.options.rolling_feet
+
     def _declare(self) -> None:
         o, r = self.options, self.robot
         lo, hi = r.lower_rad.ravel(), r.upper_rad.ravel()
@@ -139,6 +162,17 @@ class Theta2(ThetaProblem):
         u_n = self.par("u_n", 3)
 
         R = self.rotation(phi)
+        contacts = feet
+        if self.rolls_feet:
+            # the stance spheres roll with their shanks over the move (planner.body.rolling):
+            # the pose reached holds where the feet will be, not where they were
+            shanks = ca.reshape(self.par("shank_rotations_W", 36), 9, 4)
+            normal_cols = ca.reshape(normals, 3, 4)
+            rolled = rolled_centres_W_ca(
+                self.kin, R, th, ca.reshape(centres, 3, 4), normal_cols, shanks
+            )
+            centres = ca.vec(rolled)
+            contacts = ca.vec(rolled - self.robot.foot_radius_m * normal_cols)
         self.constrain("contact", ca.vec(self.kin.feet_W_ca(pos, R, th)) - centres)
         self._constrain_reach(pos, R, centres)
         self.constrain_body_pose(pos, R, phi, s1, s2, u_f, u_n)
@@ -153,7 +187,7 @@ class Theta2(ThetaProblem):
             self.constrain("com", com - rc)
         th_land = self._constrain_swing(pos, R)
         if o.forces and (free_height or not self.fix_com):
-            self._constrain_forces(pos, R, th, feet, normals, centres, com, th_land)
+            self._constrain_forces(pos, R, th, contacts, normals, centres, com, th_land)
         d_theta = th - ca.DM(r.theta_nor.ravel())
         self.maximise_log("sigma1", o.weights[0], s1)
         self.maximise_log("sigma2", o.weights[1], s2)
@@ -397,6 +431,9 @@ class Theta2(ThetaProblem):
         if "support_S_inv" in self._p_slices:
             centroid, s_inv = self.support_geometry(start.feet_W)
             values |= {"support_centroid": centroid, "support_S_inv": s_inv.T.ravel()}
+        if self.rolls_feet:  # the shanks' start orientations, each column-major
+            shanks = leg_rotations_W(self.kin, start.base_rotation_W, start.joints_rad)
+            values["shank_rotations_W"] = np.concatenate([R.T.ravel() for R in shanks])
         return self.pack_params(
             values
             | {
@@ -635,6 +672,13 @@ class Theta2(ThetaProblem):
             state.info["landing"] = (np.asarray(swing_target_W, float).copy(), land)
         return x, p, state
 
+    def _sibling(self, sway: bool) -> Theta2:
+        """This problem with the torque rows (and the sway rows where ``sway``)."""
+        return Theta2(
+            self.robot, self.terrain, self.support, self.options, self.mu,
+            self.landing, torque_rows=True, sway_rows=sway,
+        )  # fmt: skip
+
     def _solve_sibling(
         self, sol: ThetaSolution, p: np.ndarray, aim: float | None = None
     ) -> ThetaSolution:
@@ -647,10 +691,7 @@ class Theta2(ThetaProblem):
         sway = aim is not None or sol.violations.get("sway", 0.0) > 0.0
         sib = self._sway_problem if sway else self._torque_problem
         if sib is None:
-            sib = Theta2(
-                self.robot, self.terrain, self.support, self.options, self.mu,
-                self.landing, torque_rows=True, sway_rows=sway,
-            )  # fmt: skip
+            sib = self._sibling(sway)
             if sway:
                 self._sway_problem = sib
             else:
@@ -727,9 +768,29 @@ class Theta2(ThetaProblem):
         )
         return state
 
+    def rolled_feet(self, state: State, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(centres, contacts), each (4, 3): where the stance spheres roll to at ``state``.
+
+        The start's own centres and contacts without rolling (:attr:`rolls_feet`).
+        """
+        cen = p[self._p_slices["centres_W"]].reshape(4, 3)
+        feet = p[self._p_slices["feet_W"]].reshape(4, 3)
+        if not self.rolls_feet:
+            return cen, feet
+        n = p[self._p_slices["normals_W"]].reshape(4, 3)
+        shanks = p[self._p_slices["shank_rotations_W"]].reshape(4, 3, 3).transpose(0, 2, 1)
+        rolled = rolled_centres_W(
+            self.kin, state.base_rotation_W, state.joints_rad, cen, shanks, n
+        )
+        return rolled, rolled - self.robot.foot_radius_m * n
+
     def _violations(self, state: State, x, p) -> dict[str, float]:
         ck = self.check
-        cen = p[self._p_slices["centres_W"]].reshape(4, 3)
+        cen, rolled_feet = self.rolled_feet(state, p)
+        stance = state  # the checks of the feet (contacts, forces, balance): rolled ones
+        if self.rolls_feet:
+            stance = state.copy()
+            stance.feet_W = rolled_feet
         far = 0.0
         for i, lg in enumerate(self.robot.legs):
             hip_B = hip_point_B(lg)
@@ -739,7 +800,11 @@ class Theta2(ThetaProblem):
             far = max(far, d - STANCE_REACH_FRACTION * float(self.robot.reach_m[i]))
         v = {
             "reach": far,
-            "contact": ck.contacts(state, range(4)),
+            "contact": (
+                float(np.max(np.linalg.norm(ck.foot_centres_W(state) - cen, axis=1)))
+                if self.rolls_feet
+                else ck.contacts(state, range(4))
+            ),
             "joint_limits": ck.joint_limits(state),
             "clearance": ck.clearance(state),
             "orientation": ck.orientation(state),
@@ -751,7 +816,7 @@ class Theta2(ThetaProblem):
             d = float(np.linalg.norm(hip_W - p[self._p_slices["swing_target_W"]]))
             v["swing_ready"] = max(d - float(p[self._p_slices["swing_reach_m"]][0]), 0.0)
             if self.landing:
-                landed = self._link_state("landing_clearance", state, x)
+                landed = self._link_state("landing_clearance", stance, x)
                 if self.options.forces:
                     v["forces_landing"] = max(ck.forces(landed, self.support, self.mu)[0], 0.0)
                 foot = (
@@ -762,7 +827,7 @@ class Theta2(ThetaProblem):
                 if self.options.forces:
                     need = stability.PATH_BALANCE_MARGIN_M
                     have = stability.support_margin_m(
-                        state.feet_W[list(self.support)], ck.com_W(landed)
+                        stance.feet_W[list(self.support)], ck.com_W(landed)
                     )
                     v["balance_margin_landing"] = max(need - have, 0.0)
         band = self.height_band_m
@@ -773,21 +838,21 @@ class Theta2(ThetaProblem):
             else:
                 v["com"] = float(np.linalg.norm(off))
         if self.options.forces or self.fix_com:
-            viol, forces = ck.forces(state, self.support, self.mu)
+            viol, forces = ck.forces(stance, self.support, self.mu)
             state.forces_W = forces
             if self.options.forces:
                 v["forces"] = max(viol, 0.0)
         if self._keeps_balance_margin():
-            have = stability.support_margin_m(state.feet_W[list(self.support)], ck.com_W(state))
+            have = stability.support_margin_m(stance.feet_W[list(self.support)], ck.com_W(state))
             v["balance_margin"] = max(self.options.balance_margin_m - have, 0.0)
             res = None
             if self.options.torque_fraction is not None:
-                res = self._commanded(state)
+                res = self._commanded(stance)
                 ratio = float(res.ratio) if np.isfinite(res.ratio) else float("inf")
                 v["torque"] = max(ratio - self.options.torque_fraction - TORQUE_SOCP_TOL, 0.0)
             if self.options.sway_stiffness is not None:
                 if res is None:
-                    res = self._commanded(state)
+                    res = self._commanded(stance)
                 need = sway_stiffness_of(self.robot).bound_n_per_m(self.options.sway_stiffness)
                 have = self._stiffness(state, res.torques_nm).least
                 state.info["sway_n_per_m"] = have
