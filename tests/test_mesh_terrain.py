@@ -353,14 +353,15 @@ def test_mesh_plan_has_the_steps_of_the_yaml_course(plans):
     that looks ahead to it) the terrains are the same: 5 mm. At the edge the walks may part:
     a swing that fails on one terrain (a hind leg folded at its lift-off) is recovered with
     shorter strides, and the step counts then differ (measured 28-33 mesh against 28-29
-    analytic steps over starts 0.199-0.21 m), so the touch-downs are compared in order up to the first within 10 cm of the edge.
+    analytic steps over starts 0.199-0.21 m), so the touch-downs are compared in order up
+    to the first within 10 cm of the edge.
     """
     _, out = plans
     tm, tr = _touch_downs(out["mesh"][1]), _touch_downs(out["yaml"][1])
     n_mesh, n_ref = len(tm), len(tr)
     worst = worst_flat = 0.0
     n_near = n_flat = 0
-    for (leg_m, p), (leg_r, q) in zip(tm, tr):  # the walks in step, up to the edge
+    for (leg_m, p), (leg_r, q) in zip(tm, tr, strict=False):  # the walks in step, up to the edge
         if max(p[0], q[0]) >= STEP_X - 0.1:
             break
         assert leg_m == leg_r, (n_near, leg_m, leg_r)

@@ -33,7 +33,8 @@ AXES_INTERSECT_TOL_M = 1e-9
 NOMINAL_DEPTH_FRACTION = 0.8  # theta_nor puts the foot at 80 % of the leg's vertical reach
 
 
-def _rot_ca(axis: np.ndarray, angle):
+def axis_rotation_ca(axis: np.ndarray, angle):
+    """exp(hat(axis) angle) by Rodrigues' formula: a unit ``axis`` (3,), a symbolic angle."""
     w = ca.DM([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
     return ca.DM.eye(3) + ca.sin(angle) * w + (1 - ca.cos(angle)) * ca.mtimes(w, w)
 
@@ -144,7 +145,7 @@ def twist_apply_ca(leg: Leg, theta, point_B, upto: int = 3):
     p = ca.DM(point_B) if isinstance(point_B, np.ndarray) else point_B
     for j in reversed(range(upto)):
         r = ca.DM(leg.points_B[j])
-        p = ca.mtimes(_rot_ca(leg.axes_B[j], theta[j]), p - r) + r
+        p = ca.mtimes(axis_rotation_ca(leg.axes_B[j], theta[j]), p - r) + r
     return p
 
 

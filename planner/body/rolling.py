@@ -78,20 +78,21 @@ def leg_rotations_W_ca(kin: LegKinematics, base_rotation_W, joints12) -> list:
     """:func:`leg_rotations_W` in CasADi: four symbolic (3, 3) shank orientations."""
     import casadi as ca
 
+    from planner.body.kinematics import axis_rotation_ca
+
     out = []
     for i, leg in enumerate(kin.legs):
         R = base_rotation_W
         for j in range(3):
-            a = np.asarray(leg.axes_B[j], float)
-            K = ca.DM([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
-            th = joints12[3 * i + j]
-            R = ca.mtimes(R, ca.DM.eye(3) + ca.sin(th) * K + (1.0 - ca.cos(th)) * ca.mtimes(K, K))
+            axis = np.asarray(leg.axes_B[j], float)
+            R = ca.mtimes(R, axis_rotation_ca(axis, joints12[3 * i + j]))
         out.append(R)
     return out
 
 
-def rolled_centres_W(kin: LegKinematics, base_rotation_W, joints_rad, centres_W, rotations_W,
-                     normals_W) -> _Array:
+def rolled_centres_W(
+    kin: LegKinematics, base_rotation_W, joints_rad, centres_W, rotations_W, normals_W
+) -> _Array:
     """(4, 3) sphere centres rolled from ``centres_W`` as the shanks turn to ``joints_rad``.
 
     ``rotations_W`` (4, 3, 3): the shanks' orientations where the centres were
@@ -104,25 +105,23 @@ def rolled_centres_W(kin: LegKinematics, base_rotation_W, joints_rad, centres_W,
     return c + rolling_displacement(rotations_W, R_now, normals_W, kin.robot.foot_radius_m)
 
 
-def rolled_centres_W_ca(kin: LegKinematics, base_rotation_W, joints12, centres_cols,
-                        normals_cols, rotations_cols):
+def rolled_centres_W_ca(
+    kin: LegKinematics, base_rotation_W, joints12, centres_cols, normals_cols, rotations_cols
+):
     """:func:`rolled_centres_W` in CasADi: a (3, 4) expression of the body pose and joints.
 
-    ``rotations_cols`` (9, 4): each shank's start orientation, column-major. The rotation
-    vector w = theta / sin(theta) v (v the axial vector of the skew part) is smooth at
-    theta = 0, where its series 1 + theta^2 / 6 is taken.
+    ``rotations_cols`` (9, 4): each shank's start orientation, column-major; w by
+    :func:`planner.core.lie.vector_from_rotation_ca`.
     """
     import casadi as ca
+
+    from planner.core.lie import vector_from_rotation_ca
 
     rho = float(kin.robot.foot_radius_m)
     cols = []
     for i, R_now in enumerate(leg_rotations_W_ca(kin, base_rotation_W, joints12)):
-        M = ca.mtimes(R_now, ca.reshape(rotations_cols[:, i], 3, 3).T)
-        v = 0.5 * ca.vertcat(M[2, 1] - M[1, 2], M[0, 2] - M[2, 0], M[1, 0] - M[0, 1])
-        c = 0.5 * (M[0, 0] + M[1, 1] + M[2, 2] - 1.0)
-        s2 = ca.dot(v, v)
-        f = ca.if_else(s2 < 1e-8, 1.0 + s2 / 6.0, ca.atan2(ca.sqrt(s2), c) / ca.sqrt(s2), True)
-        cols.append(centres_cols[:, i] + rho * ca.cross(f * v, normals_cols[:, i]))
+        w = vector_from_rotation_ca(ca.mtimes(R_now, ca.reshape(rotations_cols[:, i], 3, 3).T))
+        cols.append(centres_cols[:, i] + rho * ca.cross(w, normals_cols[:, i]))
     return ca.horzcat(*cols)
 
 

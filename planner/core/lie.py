@@ -27,6 +27,7 @@ __all__ = [
     "rotation_from_vector",
     "rotation_from_vector_ca",
     "vector_from_rotation",
+    "vector_from_rotation_ca",
     "pose_from_coords",
     "pose_from_coords_ca",
     "coords_from_pose",
@@ -164,6 +165,19 @@ def vector_from_rotation(R: ArrayLike) -> _Array:
     if axis @ w < 0.0:
         axis = -axis
     return theta * axis
+
+
+def vector_from_rotation_ca(R: ca.SX | ca.MX | ca.DM) -> ca.SX | ca.MX | ca.DM:
+    """:func:`vector_from_rotation` in CasADi for rotations below pi: theta / sin(theta) v.
+
+    v is the axial vector of R's skew part; its series 1 + theta^2 / 6 is taken near
+    theta = 0, where the expression and its derivatives stay smooth.
+    """
+    v = 0.5 * ca.vertcat(R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1])
+    c = 0.5 * (R[0, 0] + R[1, 1] + R[2, 2] - 1.0)
+    s2 = ca.dot(v, v)
+    f = ca.if_else(s2 < 1e-8, 1.0 + s2 / 6.0, ca.atan2(ca.sqrt(s2), c) / ca.sqrt(s2), True)
+    return f * v
 
 
 def pose_from_coords(eps: ArrayLike) -> _Array:

@@ -47,7 +47,7 @@ class Theta1(Theta2):
                          sway_rows=sway_rows)  # fmt: skip
 
     def _sibling(self, sway: bool) -> Theta1:
-        """This problem, COM still pinned, with the torque (and sway) rows."""
+        """The same problem, COM still pinned, with the torque (and sway) rows."""
         return Theta1(
             self.robot, self.terrain, self.support, self.options, self.mu, self.height_band_m,
             torque_rows=True, sway_rows=sway,

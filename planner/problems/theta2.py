@@ -673,7 +673,7 @@ class Theta2(ThetaProblem):
         return x, p, state
 
     def _sibling(self, sway: bool) -> Theta2:
-        """This problem with the torque rows (and the sway rows where ``sway``)."""
+        """The same problem with the torque rows (and the sway rows where ``sway``)."""
         return Theta2(
             self.robot, self.terrain, self.support, self.options, self.mu,
             self.landing, torque_rows=True, sway_rows=sway,
@@ -779,9 +779,7 @@ class Theta2(ThetaProblem):
             return cen, feet
         n = p[self._p_slices["normals_W"]].reshape(4, 3)
         shanks = p[self._p_slices["shank_rotations_W"]].reshape(4, 3, 3).transpose(0, 2, 1)
-        rolled = rolled_centres_W(
-            self.kin, state.base_rotation_W, state.joints_rad, cen, shanks, n
-        )
+        rolled = rolled_centres_W(self.kin, state.base_rotation_W, state.joints_rad, cen, shanks, n)
         return rolled, rolled - self.robot.foot_radius_m * n
 
     def _violations(self, state: State, x, p) -> dict[str, float]:
