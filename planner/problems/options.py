@@ -90,6 +90,7 @@ class ThetaOptions:
     joint_scale_rad: float = 1.0  # sigma3 = exp(-|theta - theta_nor|^2 / (2 joint_scale^2))
     jit: bool = False  # NLP functions compiled to C, cached on disk (planner.problems.compiled)
     rolling_feet: bool = False  # Theta2 solves for the centres its stance spheres roll to (4.3)
+    lift_ready: bool = False  # landing-ready Theta2 also proves the swing leg can lift off
     mu_init: float | None = 1e-3  # None: IPOPT's adaptive strategy from 0.1
 
 

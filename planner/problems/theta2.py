@@ -34,7 +34,12 @@ With ``landing=True`` it is also *landing-ready*: three more variables, the swin
 joints at touch-down, must put its foot on the target's sphere centre from this body pose
 with its thigh and shank clear of the terrain (planner.body.links margins). Stepping down an
 edge, the body then moves to where the shank can pass the edge, which Theta3 (body fixed)
-cannot do.
+cannot do. With ``ThetaOptions.lift_ready`` it is also *lift-ready*: three more variables,
+the swing leg's joints at lift-off, put its sphere ``LIFT_FRACTION_OF_CLEARANCE`` of the
+swing clearance up its foothold's normal from this body pose, on the same knee branch
+(within ``LIFT_JOINT_STEP_RAD`` of its stance joints), inside the landing's joint bounds and
+with its links clear: a leg folded at its knee limit under a high body cannot lift at all,
+and the swing's first sample (eq. 6a's liftoff) fails however the foothold is chosen.
 
 On three legs the pose must also be one the servos can hold: no support joint beyond
 ``torque_fraction`` of its URDF effort in the commanded (effort-weighted least-squares)
@@ -59,6 +64,7 @@ from planner.core.failures import FailureKind, kinds_of_groups
 from planner.core.lie import coords_from_pose
 from planner.core.units import GRAVITY_M_S2
 from planner.motion.heuristics import frame_from_directions
+from planner.motion.interpolate import default_clearance_m
 from planner.problems.base import (
     FEASIBILITY_TOL,
     ThetaOptions,
@@ -78,6 +84,10 @@ STANCE_REACH_FRACTION = 0.96  # body-move ends keep every hip within this of its
 # tau / effort; IPOPT holds the bound to 1e-9 and sits on it when it is active
 TORQUE_SOCP_TOL = 1e-4
 LANDING_WEIGHT = 0.1  # gamma of the landing joints' closeness to theta_nor (keeps them defined)
+# lift-ready: the sphere this fraction of the default swing clearance up the normal (the
+# liftoff of the half-clearance swing the step tries second: 7.5 mm for LittleDog) ...
+LIFT_FRACTION_OF_CLEARANCE = 0.25
+LIFT_JOINT_STEP_RAD = 0.35  # ... with joints this near the stance leg's (the same knee branch)
 SWAY_ROUNDS = 3  # re-solves with the sway-stiffness rows, at most (each refreezes G)
 SWAY_SLACK = 0.10  # the rows ask this much more than the bound (their G part is frozen)
 _TRIL = np.tril_indices(6)  # the 21 entries of a symmetric 6 x 6 matrix's lower triangle
@@ -185,7 +195,7 @@ class Theta2(ThetaProblem):
             self.constrain("com_height", com[2] - rc[2], -band, band)
         elif self.fix_com:
             self.constrain("com", com - rc)
-        th_land = self._constrain_swing(pos, R)
+        th_land = self._constrain_swing(pos, R, th, centres, normals)
         if o.forces and (free_height or not self.fix_com):
             self._constrain_forces(pos, R, th, contacts, normals, centres, com, th_land)
         d_theta = th - ca.DM(r.theta_nor.ravel())
@@ -214,12 +224,13 @@ class Theta2(ThetaProblem):
         ]
         self.constrain("reach", ca.vertcat(*stretch), -np.inf, 0.0)
 
-    def _constrain_swing(self, pos, R):
+    def _constrain_swing(self, pos, R, th, centres, normals):
         """On three feet: the swing leg's hip within reach of its target (swing-ready).
 
         Landing-ready too (``landing``): the swing leg's joints at touch-down (variables
         ``theta_land``, returned; None without ``landing``) reach the target's sphere
-        centre from this body pose, thigh and shank clear of the terrain.
+        centre from this body pose, thigh and shank clear of the terrain. Lift-ready
+        (``lift_ready``, :meth:`_constrain_lift`): its joints at lift-off too.
         """
         o, r = self.options, self.robot
         th_land = None
@@ -240,7 +251,33 @@ class Theta2(ThetaProblem):
             self.maximise_log(
                 "sigma_land", LANDING_WEIGHT, sigma3_ca(th_land - ca.DM(r.theta_nor[leg]), o)
             )
+            if o.lift_ready:
+                self._constrain_lift(pos, R, leg, th[3 * leg : 3 * leg + 3], centres, normals)
         return th_land
+
+    @property
+    def lift_m(self) -> float:
+        """How far up its normal the lift-ready swing sphere rises [m]."""
+        return LIFT_FRACTION_OF_CLEARANCE * default_clearance_m(self.robot)
+
+    def _constrain_lift(self, pos, R, leg, th_leg, centres, normals) -> None:
+        """Lift-ready: ``leg`` can lift its sphere ``lift_m`` up its normal from this pose.
+
+        Variables ``theta_lift``: the leg's joints with the sphere at c + lift_m n (c its
+        centre at the move's end, rolled where the feet roll), within the landing's joint
+        bounds, within ``LIFT_JOINT_STEP_RAD`` of the stance joints (no knee flip) and with
+        thigh and shank clear of the terrain (eq. 6a's liftoff, :mod:`planner.motion.
+        interpolate`).
+        """
+        r = self.robot
+        th_lift = self.var("theta_lift", 3, *landing_bounds_rad(r, leg))
+        c = ca.reshape(centres, 3, 4)[:, leg]
+        n = ca.reshape(normals, 3, 4)[:, leg]
+        lift_W = ca.mtimes(R, self.kin.foot_B_ca(leg, th_lift)) + pos
+        self.constrain("lift", lift_W - (c + self.lift_m * n))
+        d = th_lift - th_leg
+        self.constrain("lift_branch", ca.dot(d, d) - LIFT_JOINT_STEP_RAD**2, -np.inf, 0.0)
+        self.constrain_leg_links(pos, R, {leg: th_lift}, name="lift_clearance")
 
     def _constrain_forces(self, pos, R, th, feet, normals, centres, com, th_land) -> None:
         """The support's eq.-5 forces inside the friction cones, and the COM's balance.
@@ -471,8 +508,22 @@ class Theta2(ThetaProblem):
             x.append([0.5])
         out = np.concatenate([np.asarray(v, float).ravel() for v in x])
         if "theta_land" in self._x_slices:  # variables are declared in this order
-            out = np.insert(out, self._x_slices["theta_land"].start, self._landing_guess(start, p))
+            guess = self._landing_guess(start, p)
+            if "theta_lift" in self._x_slices:  # declared right after theta_land
+                guess = np.concatenate([guess, self._lift_guess(start, p, R, pos, joints)])
+            out = np.insert(out, self._x_slices["theta_land"].start, guess)
         return out
+
+    def _lift_guess(self, start: State, p: np.ndarray, R, pos, joints) -> np.ndarray:
+        """Lift-off joints: IK of the sphere ``lift_m`` up, same knee, else the stance's."""
+        (leg,) = set(range(4)) - set(self.support)
+        c = p[self._p_slices["centres_W"]].reshape(4, 3)[leg]
+        n = p[self._p_slices["normals_W"]].reshape(4, 3)[leg]
+        th = np.asarray(joints, float).reshape(4, 3)[leg]
+        knee = self.kin.knee_direction(leg, th)
+        up_B = R.T @ (c + self.lift_m * n - pos)
+        ik = self.kin.ik_leg(leg, up_B, reference_rad=th, knee=knee)
+        return ik.joints_rad if ik.reachable and not ik.knee_flipped else th.copy()
 
     def _landing_guess(self, start: State, p: np.ndarray) -> np.ndarray:
         """Landing joints: IK of the swing target from the start pose, else theta_nor."""
@@ -484,14 +535,15 @@ class Theta2(ThetaProblem):
         return ik.joints_rad if ik.reachable else self.robot.theta_nor[leg].copy()
 
     def _link_state(self, name: str, state: State, x: np.ndarray) -> State:
-        """The touch-down pose for ``landing_clearance``: the swing leg at theta_land."""
-        if name != "landing_clearance":
+        """The swing leg at theta_land (``landing_clearance``) or theta_lift (``lift_...``)."""
+        var = {"landing_clearance": "theta_land", "lift_clearance": "theta_lift"}.get(name)
+        if var is None:
             return state
         (leg,) = set(range(4)) - set(self.support)
-        landed = state.copy()
-        landed.joints_rad = state.joints_rad.copy()
-        landed.joints_rad[leg] = self.x_block(x, "theta_land")
-        return landed
+        moved = state.copy()
+        moved.joints_rad = state.joints_rad.copy()
+        moved.joints_rad[leg] = self.x_block(x, var)
+        return moved
 
     def _com_shifted(self, start: State, p: np.ndarray, R) -> tuple[np.ndarray, np.ndarray]:
         """Body position and (4, 3) joints, body rotation ``R``, the COM moved toward r_c*.
@@ -782,6 +834,20 @@ class Theta2(ThetaProblem):
         rolled = rolled_centres_W(self.kin, state.base_rotation_W, state.joints_rad, cen, shanks, n)
         return rolled, rolled - self.robot.foot_radius_m * n
 
+    def _lift_violations(self, state: State, x, p, centres, leg: int) -> dict[str, float]:
+        """The lift-ready rows checked in numpy: the lifted sphere and the knee branch."""
+        th = self.x_block(x, "theta_lift")
+        up = (
+            centres[leg]
+            + self.lift_m * p[self._p_slices["normals_W"]].reshape(4, 3)[leg]
+        )
+        foot = state.base_rotation_W @ self.kin.foot_B(leg, th) + state.base_position_W
+        step = float(np.linalg.norm(th - state.joints_rad[leg]))
+        return {
+            "lift": float(np.linalg.norm(foot - up)),
+            "lift_branch": max(step - LIFT_JOINT_STEP_RAD, 0.0),
+        }
+
     def _violations(self, state: State, x, p) -> dict[str, float]:
         ck = self.check
         cen, rolled_feet = self.rolled_feet(state, p)
@@ -822,6 +888,8 @@ class Theta2(ThetaProblem):
                     + state.base_position_W
                 )
                 v["landing"] = float(np.linalg.norm(foot - p[self._p_slices["swing_target_W"]]))
+                if "theta_lift" in self._x_slices:
+                    v |= self._lift_violations(state, x, p, cen, leg)
                 if self.options.forces:
                     need = stability.PATH_BALANCE_MARGIN_M
                     have = stability.support_margin_m(
