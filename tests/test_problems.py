@@ -476,3 +476,50 @@ def test_theta2_on_a_support_narrower_than_the_balance_margin_solves_nothing(dog
     assert not ipopt.feasible
     have = support_margin_m(ipopt.state.feet_W[list(support)], problem.check.com_W(ipopt.state))
     assert have <= room + 1e-9
+
+
+def _can_lift(problem, state, leg, terrain):
+    """Independently (Paden-Kahan IK): can ``leg`` lift its sphere ``lift_m`` up the normal?"""
+    from planner.body.contact import foot_centre_from_contact
+    from planner.problems.base import landing_bounds_rad
+
+    c = foot_centre_from_contact(terrain, state.feet_W[leg], problem.robot.foot_radius_m)
+    up = c + problem.lift_m * terrain.normal(state.feet_W[leg])
+    th = state.joints_rad[leg]
+    ik = problem.kin.ik_leg(
+        leg,
+        state.base_rotation_W.T @ (up - state.base_position_W),
+        reference_rad=th,
+        knee=problem.kin.knee_direction(leg, th),
+    )
+    lo, hi = landing_bounds_rad(problem.robot, leg)
+    inside = np.all(ik.joints_rad >= lo - 1e-9) and np.all(ik.joints_rad <= hi + 1e-9)
+    return bool(ik.reachable and not ik.knee_flipped and inside)
+
+
+def test_lift_ready_body_move_leaves_the_swing_leg_room_to_lift(dog):
+    """A low body folds a hind leg to its knee limit: lift-ready keeps it able to lift off."""
+    terrain, placed, u_f, u_n = _placed(dog, "flat", 0.3)
+    start, leg = placed.state, 2  # HL swings next
+    support = tuple(i for i in range(4) if i != leg)
+    target = start.feet_W[leg] + np.array([0.05, 0.0, 0.0])
+    rc = start.feet_W[list(support)].mean(axis=0) + 0.07 * u_n  # below the legs' room
+    solved = {}
+    for lift in (False, True):
+        problem = Theta2(
+            dog, terrain, support=support, options=ThetaOptions(lift_ready=lift), landing=True
+        )
+        sol = problem.solve(start, rc, u_f, u_n, target)
+        assert sol.feasible, sol.diagnosis
+        solved[lift] = (problem, sol)
+    problem, sol = solved[False]
+    assert not _can_lift(problem, sol.state, leg, terrain)  # the case bites without it
+    problem, sol = solved[True]
+    assert _can_lift(problem, sol.state, leg, terrain)
+    # the lift joints Theta2 proved put the sphere there (Pinocchio's frames)
+    lifted = sol.state.copy()
+    lifted.joints_rad = sol.state.joints_rad.copy()
+    lifted.joints_rad[leg] = problem.x_block(sol.x, "theta_lift")
+    n = terrain.normal(start.feet_W[leg])
+    want = problem.check.foot_centres_W(start)[leg] + problem.lift_m * n
+    np.testing.assert_allclose(problem.check.foot_centres_W(lifted)[leg], want, atol=1e-6)

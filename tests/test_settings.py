@@ -136,6 +136,21 @@ def test_bad_preset_or_choice_is_one_line(capsys, argv, expect):
     assert rc == 2 and expect in err, err
 
 
+def test_rolling_feet_and_lift_ready_from_options_and_file(tmp_path, capsys):
+    """on/off from the command line, booleans from YAML, into Theta2's options."""
+    cfg = tmp_path / "s.yaml"
+    cfg.write_text("theta.rolling_feet: true\n")
+    user = resolve(load_config(cfg), {"theta.lift_ready": "on"})
+    assert user.local.theta.rolling_feet and user.local.theta.lift_ready
+    assert not resolve().local.theta.rolling_feet and not resolve().local.theta.lift_ready
+    rc = main(["plan", "--terrain", "flat", "--rolling-feet", "on", "--print-config"])
+    lines = dict(line.split(": ", 1) for line in capsys.readouterr().out.strip().splitlines())
+    assert rc == 0 and lines["theta.rolling_feet"] == "on" and lines["theta.lift_ready"] == "off"
+    rc = main(["plan", "--terrain", "flat", "--goal", "1,0", "--lift-ready", "maybe"])
+    err = _one_line_error(capsys)
+    assert rc == 2 and "--lift-ready: expected on or off, got 'maybe'" in err, err
+
+
 def test_config_com_target_is_checked(tmp_path):
     cfg = tmp_path / "s.yaml"
     cfg.write_text("com_target: 3\n")

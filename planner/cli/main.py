@@ -253,6 +253,8 @@ def _print_config(args, robot, terrain, user, settings) -> int:
     for name, value in effective(local, user.seed).items():
         if value is None:
             shown = "none"
+        elif isinstance(value, bool):
+            shown = "on" if value else "off"
         elif isinstance(value, list):
             shown = ",".join(value)
         else:

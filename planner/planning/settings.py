@@ -18,6 +18,8 @@ file (``stratawalk plan --config settings.yaml``) holds any of them::
     swing_samples: 24       # samples of a swing
     gait: [HL, FL, HR, FR]  # the crawl's leg order
     footholds: search       # each step's foothold from the contact-sequence search
+    theta.rolling_feet: on  # Theta2 on the centres the stance spheres roll to
+    theta.lift_ready: on    # body moves keep the swing leg able to lift off
     seed: 1
 
 Command-line options override the file, which overrides the defaults. The effective
@@ -56,7 +58,7 @@ class Setting:
 
     name: str
     option: str
-    kind: str  # "float", "int", "gait" or "choice"
+    kind: str  # "float", "int", "gait", "choice" or "bool"
     help: str
     lo: float = 0.0
     hi: float = math.inf
@@ -118,10 +120,20 @@ SETTINGS: tuple[Setting, ...] = (
         "first foothold of each step: lambda_t (eq. 13, one step ahead) or search (the "
         "contact-sequence search, a gait cycle ahead)", choices=("lambda_t", "search"),
     ),
+    Setting(
+        "theta.rolling_feet", "--rolling-feet", "bool",
+        "on: Theta2 solves for where the stance spheres roll (section 4.3); off: contact "
+        "points held (the paper's leaf)",
+    ),
+    Setting(
+        "theta.lift_ready", "--lift-ready", "bool",
+        "on: a body move before a swing keeps the swing leg able to lift off",
+    ),
     Setting("seed", "--seed", "int", "random seed (CMA-ES of --global, >= 1)", 1, 2**31 - 1, False),
     Setting("time_budget_s", "--time-budget", "float", "planning time budget [s]", 0.0, 1e6),
 )  # fmt: skip
 _BY_NAME = {s.name: s for s in SETTINGS}
+_BOOL_TEXT = {"on": True, "off": False, "true": True, "false": False, "yes": True, "no": False}
 
 
 @dataclass
@@ -146,6 +158,11 @@ def _value(s: Setting, raw: Any, where: str) -> Any:
                 f"got {raw!r}"
             )
         return tuple(LEG_NAMES.index(n) for n in names)
+    if s.kind == "bool":
+        text = str(raw).strip().lower()
+        if isinstance(raw, bool) or text in _BOOL_TEXT:
+            return raw if isinstance(raw, bool) else _BOOL_TEXT[text]
+        raise InputError(f"{where}: expected on or off, got {raw!r}")
     if s.kind == "choice":
         if str(raw) not in s.choices:
             raise InputError(f"{where}: expected one of {', '.join(s.choices)}, got {raw!r}")
@@ -264,7 +281,7 @@ def resolve(config: dict[str, Any] | None = None, options: dict[str, Any] | None
     for name, raw in (options or {}).items():
         if raw is not None:
             s = _BY_NAME[name]
-            if isinstance(raw, str) and s.kind not in ("gait", "choice"):
+            if isinstance(raw, str) and s.kind not in ("gait", "choice", "bool"):
                 try:
                     raw = float(raw)
                 except ValueError:
@@ -309,6 +326,8 @@ def effective(planner: Any, seed: int = 1) -> dict:
         "swing_samples": int(loc.swing_samples),
         "gait": [LEG_NAMES[i] for i in (loc.gait or CRAWL)],
         "footholds": str(loc.footholds),
+        "theta.rolling_feet": bool(loc.theta.rolling_feet),
+        "theta.lift_ready": bool(loc.theta.lift_ready),
         "seed": int(seed),
         "time_budget_s": float(loc.time_budget_s),
     }

@@ -568,8 +568,7 @@ class ThetaProblem:
             "landing_clearance": ": the swinging leg's thigh or shank would meet the terrain"
             " (an edge) when its foot lands on the next foothold",
             "landing": ": the swinging leg cannot reach its next foothold from this body pose",
-            "lift": ": the swinging leg cannot lift its foot from this body pose (a joint"
-            " limit)",
+            "lift": ": the swinging leg cannot lift its foot from this body pose (a joint limit)",
             "lift_branch": ": the swinging leg lifts its foot only on its other knee branch",
             "lift_clearance": ": the swinging leg's thigh or shank would meet the terrain as"
             " it lifts off",

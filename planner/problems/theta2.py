@@ -837,10 +837,7 @@ class Theta2(ThetaProblem):
     def _lift_violations(self, state: State, x, p, centres, leg: int) -> dict[str, float]:
         """The lift-ready rows checked in numpy: the lifted sphere and the knee branch."""
         th = self.x_block(x, "theta_lift")
-        up = (
-            centres[leg]
-            + self.lift_m * p[self._p_slices["normals_W"]].reshape(4, 3)[leg]
-        )
+        up = centres[leg] + self.lift_m * p[self._p_slices["normals_W"]].reshape(4, 3)[leg]
         foot = state.base_rotation_W @ self.kin.foot_B(leg, th) + state.base_position_W
         step = float(np.linalg.norm(th - state.joints_rad[leg]))
         return {
