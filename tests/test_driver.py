@@ -247,3 +247,6 @@ def test_a_soft_plan_counts_every_attempt_as_a_cycle(flat):
     plan = planner.plan((0.2, 0.0), (0.45, 0.0))
     assert plan.reached_goal, plan.message
     assert plan.stats["cycles"] == plan.stats["steps"] >= 4 and plan.stats["failures"] == []
+    # a step of a full stride brings the COM more than PROGRESS_M nearer: no stall longer
+    # than the crawl's four steps (a leg's step may leave the COM where it was)
+    assert 1 <= plan.stats["longest_stall_cycles"] <= 4

@@ -259,6 +259,7 @@ def _row(job: dict, rec: dict | None) -> dict[str, Any]:
         "time_ratio",
         "backtracks",
         "retraces",
+        "longest_stall_cycles",
         "message",
         "error",
         "wall_time_s",

@@ -85,6 +85,7 @@ class Run:
     halted: bool = False  # the source halted the run (an interrupt, a fall)
     best_dist_m: float = float("inf")  # nearest the COM came to the goal ...
     best_at: int = 0  # ... and in which cycle
+    longest_stall: int = 0  # most cycles between two such approaches (the stop's patience)
     arrival_tried: object = -1  # the state (Source.stamp) of the last arrival attempt
     arrivals: int = 0  # arrival moves made
 
@@ -475,6 +476,7 @@ class GaitDriver:
     def _note_progress(self, dist: float) -> None:
         run = self.run
         if dist < run.best_dist_m - PROGRESS_M:
+            run.longest_stall = max(run.longest_stall, run.cycles - run.best_at)
             run.best_dist_m, run.best_at = dist, run.cycles
 
     def failed(self, step: Step) -> None:
@@ -536,6 +538,9 @@ def plan_run(planner, start_xy, goal_xy, tau, progress, start_state) -> LocalPla
         {
             "planner": planner.name,
             "cycles": run.cycles,
+            # cycles without PROGRESS_M of progress, at most (the open stretch at the end
+            # included), against the stop's patience: how near a walk came to that stop
+            "longest_stall_cycles": max(run.longest_stall, run.cycles - run.best_at),
             "steps": walk.steps,
             "planning_time_s": time.perf_counter() - t_begin,
             "overlap_worker_steps": 0 if worker is None else worker.used,  # timed by it
