@@ -18,6 +18,7 @@ file (``stratawalk plan --config settings.yaml``) holds any of them::
     swing_samples: 24       # samples of a swing
     gait: [HL, FL, HR, FR]  # the crawl's leg order
     footholds: search       # each step's foothold from the contact-sequence search
+    restarts: 2             # a stalled walk planned again with another stance model
     theta.rolling_feet: on  # Theta2 on the centres the stance spheres roll to
     theta.lift_ready: on    # body moves keep the swing leg able to lift off
     seed: 1
@@ -119,6 +120,11 @@ SETTINGS: tuple[Setting, ...] = (
         "footholds", "--footholds", "choice",
         "first foothold of each step: lambda_t (eq. 13, one step ahead) or search (the "
         "contact-sequence search, a gait cycle ahead)", choices=("lambda_t", "search"),
+    ),
+    Setting(
+        "restarts", "--restarts", "int",
+        "a walk that stalls with time left is planned again with another model of the "
+        "stance, at most this many times (0: never)", 0, 10, False,
     ),
     Setting(
         "theta.rolling_feet", "--rolling-feet", "bool",
@@ -326,6 +332,7 @@ def effective(planner: Any, seed: int = 1) -> dict:
         "swing_samples": int(loc.swing_samples),
         "gait": [LEG_NAMES[i] for i in (loc.gait or CRAWL)],
         "footholds": str(loc.footholds),
+        "restarts": int(loc.restarts),
         "theta.rolling_feet": bool(loc.theta.rolling_feet),
         "theta.lift_ready": bool(loc.theta.lift_ready),
         "seed": int(seed),

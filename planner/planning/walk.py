@@ -19,6 +19,7 @@ from planner.planfile.validate import check_plan
 from planner.planning.hard import HardPlanner
 from planner.planning.local import LocalPlan, LocalSettings
 from planner.planning.recursive import RecursivePlanner
+from planner.planning.restarts import plan_with_restarts
 from planner.planning.settings import effective
 from planner.planning.soft import GreedyPlanner, SoftPlanner
 from planner.world.terrain import load_terrain
@@ -45,7 +46,8 @@ def plan_walk(
 
     ``robot`` and ``terrain`` may be names/paths or loaded objects; ``mu`` overrides the
     terrain's friction. Ctrl-C or the time budget of ``settings`` stops planning; the plan
-    so far is still returned. The plan records the settings in force (``stats.settings``).
+    so far is still returned. A walk that stalls with time left is planned again with
+    another model of the stance (:mod:`planner.planning.restarts`, ``settings.restarts``). The plan records the settings in force (``stats.settings``).
     """
     if planner not in PLANNERS:
         from planner.core.errors import InputError
@@ -54,8 +56,13 @@ def plan_walk(
     robot = load_robot(robot) if isinstance(robot, str) else robot
     terrain = load_terrain(terrain) if isinstance(terrain, str) else terrain
     check_endpoints(robot, terrain, start_xy, goal_xy)
-    local = PLANNERS[planner](robot, terrain, mu=mu, settings=settings)
-    result = local.plan(start_xy, goal_xy, progress=progress)
+    local, result = plan_with_restarts(
+        lambda st: PLANNERS[planner](robot, terrain, mu=mu, settings=st),
+        settings or LocalSettings(),
+        start_xy,
+        goal_xy,
+        progress,
+    )
     extra = {"planner": planner, "settings": effective(local)}
     with shielded():  # a Ctrl-C now would lose the plan computed: it waits for the plan
         return assemble_plan(robot, terrain, local.mu, start_xy, goal_xy, result, extra)

@@ -140,6 +140,8 @@ class LocalSettings:
     footholds : "search": each step's first foothold from the contact-sequence search
         (:mod:`planner.motion.contact_search`: a gait cycle ahead, certified), Lambda_t's
         where it finds none; "lambda_t": Lambda_t's (eq. 13, section 8.2.2) only.
+    restarts : a walk that stalls with time left is planned again, at most this many
+        times, with another model of the stance (:mod:`planner.planning.restarts`).
     """
 
     gait: tuple[int, ...] = CRAWL
@@ -168,4 +170,5 @@ class LocalSettings:
     level_swing_samples: int | None = None
     overlap_worker: bool = True
     footholds: str = "lambda_t"
+    restarts: int = 2
     theta: ThetaOptions = field(default_factory=ThetaOptions)
