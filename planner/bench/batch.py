@@ -253,8 +253,9 @@ def run_job(job: dict, keep_plan: bool = False) -> dict:
     ``traceback``), and for "ok": ``reached`` (validated), ``validated``, ``violations``,
     ``distance_to_goal_m``, ``steps``, ``planning_time_s`` (the local planner's),
     ``walk_time_s`` (``plan.samples.time[-1]``), ``time_ratio`` (planning / walk),
-    ``message``, ``longest_stall_cycles`` (the plan's stats), and for the recursive planner ``backtracks`` and ``retraces`` (steps undone
-    in a window, committed windows planned again); ``wall_time_s``, ``host`` and ``pid``
+    ``message``, ``longest_stall_cycles`` (the plan's stats), and for the recursive
+    planner ``backtracks`` and ``retraces`` (steps undone in a window, committed windows
+    planned again); ``wall_time_s``, ``host`` and ``pid``
     always. With ``keep_plan`` the plan
     itself is under ``plan`` (the caller writes it and drops it from the line).
     """

@@ -19,8 +19,8 @@ model of the same leaf, and every plan meets the same independent check.
 
 from __future__ import annotations
 
-from time import perf_counter
 from dataclasses import replace
+from time import perf_counter
 
 from planner.planning.local import LocalPlan, LocalSettings
 

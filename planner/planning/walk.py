@@ -47,7 +47,8 @@ def plan_walk(
     ``robot`` and ``terrain`` may be names/paths or loaded objects; ``mu`` overrides the
     terrain's friction. Ctrl-C or the time budget of ``settings`` stops planning; the plan
     so far is still returned. A walk that stalls with time left is planned again with
-    another model of the stance (:mod:`planner.planning.restarts`, ``settings.restarts``). The plan records the settings in force (``stats.settings``).
+    another model of the stance (:mod:`planner.planning.restarts`, ``settings.restarts``).
+    The plan records the settings in force (``stats.settings``).
     """
     if planner not in PLANNERS:
         from planner.core.errors import InputError
