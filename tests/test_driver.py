@@ -72,8 +72,8 @@ def test_the_planning_rules_stop_in_their_order(flat):
 
 def test_no_progress_stops_after_the_patience_of_the_planner(flat):
     """``no_progress_cycles`` cycles without the COM 1 cm nearer; a recursive planner's
-    cycle is ``node_budget / lookahead`` step attempts, so its patience is that many
-    times longer."""
+    cycle is ``attempts_per_cycle`` step attempts, so its patience is that many times
+    longer."""
     planner = flat[0]
     d, _ = _driver(flat)
     patience = planner.settings.no_progress_cycles
@@ -85,8 +85,8 @@ def test_no_progress_stops_after_the_patience_of_the_planner(flat):
     assert d.stop_reason().startswith(f"stuck: no progress in {patience} cycles")
     rec = RecursivePlanner(planner.robot, planner.terrain)
     rs = rec.recursion
-    assert StopRules.for_planning(rec).patience_cycles == patience * (
-        rs.node_budget // rs.lookahead
+    assert (
+        StopRules.for_planning(rec).patience_cycles == patience * rs.attempts_per_cycle > patience
     )
 
 

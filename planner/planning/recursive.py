@@ -21,9 +21,9 @@ cannot be made, go back as far as needed and try the earlier steps differently. 
   leg; none at all then traces back across windows: the last committed one is planned
   again with its most cautious moves first (at most ``MAX_WINDOW_RETRACES`` times a run),
   and only then is the robot stuck;
-- a window may take up to ``node_budget`` attempts for its ``lookahead`` steps, so an
-  attempt counts as a fraction of a cycle in the no-progress stop
-  (``no_progress_cycles`` x node_budget / lookahead attempts);
+- a window may take several attempts for its ``lookahead`` steps, so an attempt counts as
+  a fraction of a cycle in the no-progress stop (``no_progress_cycles`` x
+  ``attempts_per_cycle`` attempts);
 - a window is complete only where the queue's next leg can still shift the body onto the
   other three (:meth:`planner.planning.local.LocalPlanner.legs_can_move`, a plain Theta2): a
   sequence ending in a *dead end* is traced back like a failed step (``stats.dead_ends``
@@ -64,6 +64,11 @@ class RecursiveSettings:
     legs_per_level: int = 2
     ambitions: tuple = AMBITIONS
     check_all_legs: bool = False  # a window's end: every leg can move, not only the next
+    # step attempts that count as one cycle of the no-progress stop: 32 x 4 = 128 attempts
+    # without the COM 1 cm nearer; the longest such stretch of a recursive walk that then
+    # reached, on the named and hard courses, was 86 (bench/notes/2026-12-04-restarts.md),
+    # and a walk stopped there is planned again (planner.planning.restarts)
+    attempts_per_cycle: int = 4
 
 
 class _Budget(Exception):
@@ -141,9 +146,8 @@ class RecursivePlanner(LocalPlanner):
         return None
 
     def attempts_per_cycle(self) -> int:
-        """A window's ``node_budget`` attempts make its ``lookahead`` steps (see above)."""
-        rs = self.recursion
-        return max(1, rs.node_budget // max(1, rs.lookahead))
+        """Step attempts of F that count as one cycle of the no-progress stop (see above)."""
+        return max(1, int(self.recursion.attempts_per_cycle))
 
     def _search(self, driver: GaitDriver, queue: tuple[int, ...], rs: RecursiveSettings):
         """One window of F under the budgets ``rs``: (queue after it or None, the window)."""
