@@ -23,28 +23,12 @@ def climb():
     return plan, report
 
 
-def _blas_architecture() -> str:
-    from threadpoolctl import threadpool_info
-
-    return next(
-        (i.get("architecture", "") for i in threadpool_info() if i["user_api"] == "blas"), ""
-    )
-
-
-# A KNOWN DEFECT, quarantined, not a pass: the recursive search is chaotic, and with
-# OpenBLAS's AVX-512 kernels (Intel Xeon, "SkylakeX") it walks into a dead end at the riser
-# (HL left below, stuck 135 cm short after 256 cycles without progress), while on AMD EPYC
-# (AVX2 kernels) the same commit climbs. Measured on the Xeon: the start moved by 1e-6 m is
-# stuck too, by 1 mm it climbs. The dead end starts where the path's rolling feet leave
-# Theta2's pose (bench/notes/2026-12-04-rolling-theta2.md): with ThetaOptions.rolling_feet
-# the climb from 0.2 m reaches on both kinds of machine, from 0.200001 m still not, and the
-# option loses other courses, so it is off. Issue 65's contact-sequence search must make
-# this test pass on every CPU and remove this mark.
-@pytest.mark.xfail(
-    _blas_architecture() in ("SkylakeX", "Cooperlake", "SapphireRapids"),
-    reason="issue 65: the recursive climb of step10cm gets stuck with AVX-512 BLAS kernels",
-    strict=False,
-)
+# The recursive search is chaotic at the riser: with OpenBLAS's AVX-512 kernels (Intel
+# Xeon, this AMD EPYC) its first walk goes into a dead end (HL left below, stuck 135 cm
+# short), with the AVX2 kernels the same commit climbs; the restart with rolling stance
+# feet (planner.planning.restarts) climbs on both (bench/notes/2026-12-04-restarts.md).
+# On the Xeon both walks were measured apart (the first stuck, the rolling one reached
+# in 32 s: 2026-12-04-rolling-theta2.md); here the restart's plan is the test's.
 def test_recursive_plans_up_a_10cm_step(climb):
     plan, report = climb
     assert plan.outcome["reached_goal"], plan.outcome["message"]
