@@ -34,12 +34,8 @@ With ``landing=True`` it is also *landing-ready*: three more variables, the swin
 joints at touch-down, must put its foot on the target's sphere centre from this body pose
 with its thigh and shank clear of the terrain (planner.body.links margins). Stepping down an
 edge, the body then moves to where the shank can pass the edge, which Theta3 (body fixed)
-cannot do. With ``ThetaOptions.lift_ready`` it is also *lift-ready*: three more variables,
-the swing leg's joints at lift-off, put its sphere ``LIFT_FRACTION_OF_CLEARANCE`` of the
-swing clearance up its foothold's normal from this body pose, on the same knee branch
-(within ``LIFT_JOINT_STEP_RAD`` of its stance joints), inside the landing's joint bounds and
-with its links clear: a leg folded at its knee limit under a high body cannot lift at all,
-and the swing's first sample (eq. 6a's liftoff) fails however the foothold is chosen.
+cannot do. With ``ThetaOptions.lift_ready`` it is also *lift-ready*: the swing leg can lift
+its foot off from this body pose (:mod:`planner.problems.lift_ready`).
 
 On three legs the pose must also be one the servos can hold: no support joint beyond
 ``torque_fraction`` of its URDF effort in the commanded (effort-weighted least-squares)
@@ -64,7 +60,6 @@ from planner.core.failures import FailureKind, kinds_of_groups
 from planner.core.lie import coords_from_pose
 from planner.core.units import GRAVITY_M_S2
 from planner.motion.heuristics import frame_from_directions
-from planner.motion.interpolate import default_clearance_m
 from planner.problems.base import (
     FEASIBILITY_TOL,
     ThetaOptions,
@@ -76,6 +71,7 @@ from planner.problems.base import (
     sigma3_ca,
     state_from_pose_coords,
 )
+from planner.problems.lift_ready import LiftReady
 
 SWING_REACH_FRACTION = 0.92  # swing-ready: hip within this fraction of reach of the target
 NO_SWING_TARGET_M = 1e3  # reach bound that switches the swing-ready constraint off
@@ -84,10 +80,6 @@ STANCE_REACH_FRACTION = 0.96  # body-move ends keep every hip within this of its
 # tau / effort; IPOPT holds the bound to 1e-9 and sits on it when it is active
 TORQUE_SOCP_TOL = 1e-4
 LANDING_WEIGHT = 0.1  # gamma of the landing joints' closeness to theta_nor (keeps them defined)
-# lift-ready: the sphere this fraction of the default swing clearance up the normal (the
-# liftoff of the half-clearance swing the step tries second: 7.5 mm for LittleDog) ...
-LIFT_FRACTION_OF_CLEARANCE = 0.25
-LIFT_JOINT_STEP_RAD = 0.35  # ... with joints this near the stance leg's (the same knee branch)
 SWAY_ROUNDS = 3  # re-solves with the sway-stiffness rows, at most (each refreezes G)
 SWAY_SLACK = 0.10  # the rows ask this much more than the bound (their G part is frozen)
 _TRIL = np.tril_indices(6)  # the 21 entries of a symmetric 6 x 6 matrix's lower triangle
@@ -113,7 +105,7 @@ def _symmetric(tril):
     return M
 
 
-class Theta2(ThetaProblem):
+class Theta2(LiftReady, ThetaProblem):
     """Soft persuasion on a leaf of S0, built once per support pattern."""
 
     name = "Theta2"
@@ -254,30 +246,6 @@ class Theta2(ThetaProblem):
             if o.lift_ready:
                 self._constrain_lift(pos, R, leg, th[3 * leg : 3 * leg + 3], centres, normals)
         return th_land
-
-    @property
-    def lift_m(self) -> float:
-        """How far up its normal the lift-ready swing sphere rises [m]."""
-        return LIFT_FRACTION_OF_CLEARANCE * default_clearance_m(self.robot)
-
-    def _constrain_lift(self, pos, R, leg, th_leg, centres, normals) -> None:
-        """Lift-ready: ``leg`` can lift its sphere ``lift_m`` up its normal from this pose.
-
-        Variables ``theta_lift``: the leg's joints with the sphere at c + lift_m n (c its
-        centre at the move's end, rolled where the feet roll), within the landing's joint
-        bounds, within ``LIFT_JOINT_STEP_RAD`` of the stance joints (no knee flip) and with
-        thigh and shank clear of the terrain (eq. 6a's liftoff, :mod:`planner.motion.
-        interpolate`).
-        """
-        r = self.robot
-        th_lift = self.var("theta_lift", 3, *landing_bounds_rad(r, leg))
-        c = ca.reshape(centres, 3, 4)[:, leg]
-        n = ca.reshape(normals, 3, 4)[:, leg]
-        lift_W = ca.mtimes(R, self.kin.foot_B_ca(leg, th_lift)) + pos
-        self.constrain("lift", lift_W - (c + self.lift_m * n))
-        d = th_lift - th_leg
-        self.constrain("lift_branch", ca.dot(d, d) - LIFT_JOINT_STEP_RAD**2, -np.inf, 0.0)
-        self.constrain_leg_links(pos, R, {leg: th_lift}, name="lift_clearance")
 
     def _constrain_forces(self, pos, R, th, feet, normals, centres, com, th_land) -> None:
         """The support's eq.-5 forces inside the friction cones, and the COM's balance.
@@ -513,26 +481,6 @@ class Theta2(ThetaProblem):
                 guess = np.concatenate([guess, self._lift_guess(start, p, R, pos, joints)])
             out = np.insert(out, self._x_slices["theta_land"].start, guess)
         return out
-
-    def _lift_guess(self, start: State, p: np.ndarray, R, pos, joints) -> np.ndarray:
-        """Lift-off joints: IK of the sphere ``lift_m`` up, same knee, else the stance's."""
-        (leg,) = set(range(4)) - set(self.support)
-        c = p[self._p_slices["centres_W"]].reshape(4, 3)[leg]
-        n = p[self._p_slices["normals_W"]].reshape(4, 3)[leg]
-        th = np.asarray(joints, float).reshape(4, 3)[leg]
-        knee = self.kin.knee_direction(leg, th)
-        up_B = R.T @ (c + self.lift_m * n - pos)
-        ik = self.kin.ik_leg(leg, up_B, reference_rad=th, knee=knee)
-        return ik.joints_rad if ik.reachable and not ik.knee_flipped else th.copy()
-
-    def _landing_guess(self, start: State, p: np.ndarray) -> np.ndarray:
-        """Landing joints: IK of the swing target from the start pose, else theta_nor."""
-        (leg,) = set(range(4)) - set(self.support)
-        centre_B = start.base_rotation_W.T @ (
-            p[self._p_slices["swing_target_W"]] - start.base_position_W
-        )
-        ik = self.kin.ik_leg(leg, centre_B, reference_rad=start.joints_rad[leg], closest=False)
-        return ik.joints_rad if ik.reachable else self.robot.theta_nor[leg].copy()
 
     def _link_state(self, name: str, state: State, x: np.ndarray) -> State:
         """The swing leg at theta_land (``landing_clearance``) or theta_lift (``lift_...``)."""
@@ -833,17 +781,6 @@ class Theta2(ThetaProblem):
         shanks = p[self._p_slices["shank_rotations_W"]].reshape(4, 3, 3).transpose(0, 2, 1)
         rolled = rolled_centres_W(self.kin, state.base_rotation_W, state.joints_rad, cen, shanks, n)
         return rolled, rolled - self.robot.foot_radius_m * n
-
-    def _lift_violations(self, state: State, x, p, centres, leg: int) -> dict[str, float]:
-        """The lift-ready rows checked in numpy: the lifted sphere and the knee branch."""
-        th = self.x_block(x, "theta_lift")
-        up = centres[leg] + self.lift_m * p[self._p_slices["normals_W"]].reshape(4, 3)[leg]
-        foot = state.base_rotation_W @ self.kin.foot_B(leg, th) + state.base_position_W
-        step = float(np.linalg.norm(th - state.joints_rad[leg]))
-        return {
-            "lift": float(np.linalg.norm(foot - up)),
-            "lift_branch": max(step - LIFT_JOINT_STEP_RAD, 0.0),
-        }
 
     def _violations(self, state: State, x, p) -> dict[str, float]:
         ck = self.check
