@@ -57,7 +57,7 @@ def plan_with_restarts(make_planner, settings: LocalSettings, start_xy, goal_xy,
     t0 = perf_counter()
     budget = float(settings.time_budget_s)
     local = make_planner(settings)
-    best = (local, local.plan(start_xy, goal_xy, progress=progress))
+    best = (local, local.plan(start_xy, goal_xy, progress=progress), 0)
     attempts = [_attempt("as set", best[1])]
     for name, flipped in VARIANTS[: max(0, int(settings.restarts))]:
         result = best[1]
@@ -68,12 +68,11 @@ def plan_with_restarts(make_planner, settings: LocalSettings, start_xy, goal_xy,
         walk = local.plan(start_xy, goal_xy, progress=progress)
         attempts.append(_attempt(name, walk))
         if _better(walk, result):
-            best = (local, walk)
+            best = (local, walk, len(attempts) - 1)
         if walk.interrupted:
             break
-    local, result = best
+    local, result, k = best
     if len(attempts) > 1:
-        k = next(i for i, a in enumerate(attempts) if a["message"] == result.message)
         result.message += f" (attempt {k + 1} of {len(attempts)}: {attempts[k]['variant']})"
     result.stats["planning_time_s"] = perf_counter() - t0
     result.stats["restarts"] = attempts
