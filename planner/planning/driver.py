@@ -89,6 +89,16 @@ class Run:
     arrival_tried: object = -1  # the state (Source.stamp) of the last arrival attempt
     arrivals: int = 0  # arrival moves made
 
+    @property
+    def longest_stall_cycles(self) -> int:
+        """Most cycles without progress so far, the open stretch since ``best_at`` included."""
+        return max(self.longest_stall, self.cycles - self.best_at)
+
+    def restart_stall(self) -> None:
+        """A stretch without progress begins now (the one ending is kept in the longest)."""
+        self.longest_stall = self.longest_stall_cycles
+        self.best_at = self.cycles
+
 
 class Walk:
     """Keyframes and timed dense samples of a walk being planned; can be rewound.
@@ -476,8 +486,8 @@ class GaitDriver:
     def _note_progress(self, dist: float) -> None:
         run = self.run
         if dist < run.best_dist_m - PROGRESS_M:
-            run.longest_stall = max(run.longest_stall, run.cycles - run.best_at)
-            run.best_dist_m, run.best_at = dist, run.cycles
+            run.restart_stall()
+            run.best_dist_m = dist
 
     def failed(self, step: Step) -> None:
         """Note a failed step: the last failure (stop messages), the planner's failure log."""
@@ -540,7 +550,7 @@ def plan_run(planner, start_xy, goal_xy, tau, progress, start_state) -> LocalPla
             "cycles": run.cycles,
             # cycles without PROGRESS_M of progress, at most (the open stretch at the end
             # included), against the stop's patience: how near a walk came to that stop
-            "longest_stall_cycles": max(run.longest_stall, run.cycles - run.best_at),
+            "longest_stall_cycles": run.longest_stall_cycles,
             "steps": walk.steps,
             "planning_time_s": time.perf_counter() - t_begin,
             "overlap_worker_steps": 0 if worker is None else worker.used,  # timed by it

@@ -119,8 +119,7 @@ class _Retracing(QueueCycle):
             driver.queue = GaitQueue(legs)
             driver.step_scale = {i: 1.0 for i in range(4)}
             run.fails_in_row = 0
-            run.longest_stall = max(run.longest_stall, run.cycles - run.best_at)
-            run.best_at = run.cycles
+            run.restart_stall()
             p.extra_stats["retraces"] += 1
         p.foothold_lookahead = walk.steps < self.lookahead_until
         self.ambition = p.retraces[self.level - 1][1] if p.foothold_lookahead else 1.0
